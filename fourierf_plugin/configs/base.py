@@ -1,0 +1,201 @@
+"""Config dataclasses that build their component, and a data-only JSON round trip for them.
+
+Every component has a config with a ``_target`` (the class it builds) and ``setup(**runtime_kwargs)``. Runtime
+values (device, scene box, ...) are passed to ``setup`` and never stored, so a saved config is plain data.
+JSON (not pickled YAML) keeps ``config.json`` readable and safe: only registered config classes can be named
+in it, so loading one cannot import or run arbitrary code.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import types
+import typing
+from pathlib import Path
+from typing import Any, ClassVar, Literal, TypeVar, Union, get_args, get_origin
+
+from fourierf_plugin import __version__
+from fourierf_plugin.utils.errors import fail
+
+C = TypeVar("C", bound="InstantiateConfig")
+CONFIG_FORMAT = 1
+
+
+@dataclasses.dataclass
+class InstantiateConfig:
+    """Base of every config: ``setup()`` returns ``_target(self, **kwargs)``."""
+
+    # Set by subclasses with ``field(default_factory=lambda: Cls)``; hidden from the CLI and from JSON.
+    _target: ClassVar[type | None] = None
+
+    def setup(self, **kwargs: Any) -> Any:
+        target = type(self)._target
+        if target is None:
+            raise TypeError(f"{type(self).__name__} has no _target to build")
+        return target(self, **kwargs)
+
+
+def _registry() -> dict[str, type]:
+    """All config dataclasses by class name (subclasses of InstantiateConfig, recursively)."""
+    found: dict[str, type] = {}
+    stack: list[type] = [InstantiateConfig]
+    while stack:
+        cls = stack.pop()
+        stack.extend(cls.__subclasses__())
+        if dataclasses.is_dataclass(cls):
+            found[cls.__name__] = cls
+    return found
+
+
+def to_dict(cfg: Any) -> Any:
+    """A config tree as JSON-ready data; dataclasses carry their class name under ``_type``."""
+    if dataclasses.is_dataclass(cfg) and not isinstance(cfg, type):
+        out: dict[str, Any] = {"_type": type(cfg).__name__}
+        for f in dataclasses.fields(cfg):
+            if f.name.startswith("_"):
+                continue
+            out[f.name] = to_dict(getattr(cfg, f.name))
+        return out
+    if isinstance(cfg, Path):
+        return str(cfg)
+    if isinstance(cfg, (list, tuple)):
+        return [to_dict(v) for v in cfg]
+    if isinstance(cfg, dict):
+        return {str(k): to_dict(v) for k, v in cfg.items()}
+    if cfg is None or isinstance(cfg, (bool, int, float, str)):
+        return cfg
+    raise TypeError(f"cannot store {type(cfg).__name__} in a config: {cfg!r}")
+
+
+def _convert(value: Any, tp: Any, where: str) -> Any:
+    """Convert JSON data to the annotated type ``tp`` (dataclasses, unions, paths, tuples, literals)."""
+    origin = get_origin(tp)
+    if tp is Any:
+        return value
+    if origin in (Union, types.UnionType):
+        options = get_args(tp)
+        if value is None and type(None) in options:
+            return None
+        if isinstance(value, dict) and "_type" in value:
+            return _from_dict(value, where)
+        errors = []
+        for opt in options:
+            if opt is type(None):
+                continue
+            try:
+                return _convert(value, opt, where)
+            except (TypeError, ValueError) as err:
+                errors.append(str(err))
+        raise ValueError(f"{where}: {value!r} matches none of {options}: {errors}")
+    if origin is Literal:
+        if value not in get_args(tp):
+            raise ValueError(f"{where}: {value!r} is not one of {get_args(tp)}")
+        return value
+    if origin in (tuple, list):
+        if not isinstance(value, list):
+            raise TypeError(f"{where}: expected a list, got {value!r}")
+        args = get_args(tp)
+        if origin is tuple and args and args[-1] is not Ellipsis:
+            return tuple(_convert(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args, strict=True)))
+        item = args[0] if args else Any
+        seq = [_convert(v, item, f"{where}[{i}]") for i, v in enumerate(value)]
+        return tuple(seq) if origin is tuple else seq
+    if origin is dict:
+        _, v_tp = get_args(tp) or (Any, Any)
+        return {k: _convert(v, v_tp, f"{where}.{k}") for k, v in value.items()}
+    if dataclasses.is_dataclass(tp):
+        if not isinstance(value, dict):
+            raise TypeError(f"{where}: expected an object, got {value!r}")
+        return _from_dict(value, where, default_cls=tp)
+    if tp is Path:
+        if not isinstance(value, str):
+            raise TypeError(f"{where}: expected a path string, got {value!r}")
+        return Path(value)
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise TypeError(f"{where}: expected a number, got {value!r}")
+        return float(value)
+    if tp in (int, bool, str):
+        if not isinstance(value, tp) or (tp is int and isinstance(value, bool)):
+            raise TypeError(f"{where}: expected {tp.__name__}, got {value!r}")
+        return value
+    if tp is type(None):
+        if value is not None:
+            raise TypeError(f"{where}: expected null")
+        return None
+    raise TypeError(f"{where}: unsupported annotation {tp!r}")
+
+
+def _from_dict(data: dict[str, Any], where: str, default_cls: type | None = None) -> Any:
+    registry = _registry()
+    name = data.get("_type")
+    cls = registry.get(name, default_cls) if name is not None else default_cls
+    if cls is None:
+        raise ValueError(f"{where}: unknown config class {name!r} (known: {sorted(registry)})")
+    hints = typing.get_type_hints(cls)
+    kwargs: dict[str, Any] = {}
+    names = {f.name for f in dataclasses.fields(cls) if not f.name.startswith("_")}
+    unknown = set(data) - names - {"_type"}
+    if unknown:
+        raise ValueError(f"{where}: {cls.__name__} has no field(s) {sorted(unknown)}")
+    for key, value in data.items():
+        if key == "_type":
+            continue
+        kwargs[key] = _convert(value, hints[key], f"{where}.{key}")
+    return cls(**kwargs)
+
+
+def from_dict(data: dict[str, Any], expected: type[C] | None = None) -> C:
+    """Rebuild a config tree saved by :func:`to_dict`."""
+    cfg = _from_dict(data, "config", default_cls=expected)
+    if expected is not None and not isinstance(cfg, expected):
+        raise ValueError(f"config holds a {type(cfg).__name__}, expected {expected.__name__}")
+    return cfg
+
+
+def save_config(cfg: Any, path: Path) -> None:
+    """Write ``config.json`` atomically (temp file + rename)."""
+    payload = {"fourierf_version": __version__, "config_format": CONFIG_FORMAT, "config": to_dict(cfg)}
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(payload, indent=2) + "\n")
+    tmp.replace(path)
+
+
+def load_config(path: Path, expected: type[C] | None = None) -> C:
+    """Read a ``config.json``; every problem becomes one clear :class:`UserError`."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "config.json"
+    if not path.is_file():
+        fail(
+            f"config file not found: {path}",
+            "pass the config.json written in a run directory (outputs/<scene>/<method>/<timestamp>/config.json)",
+        )
+    try:
+        payload = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        fail(f"{path} is not valid JSON ({err})", "point at an untouched config.json written by fourierf-train")
+    if not isinstance(payload, dict) or "config" not in payload:
+        fail(f"{path} is not a fourierf config (no 'config' key)", "point at a config.json written by fourierf-train")
+    fmt = payload.get("config_format")
+    if fmt != CONFIG_FORMAT:
+        fail(
+            f"{path} uses config format {fmt!r} (fourierf {payload.get('fourierf_version')!r}); this is fourierf "
+            f"{__version__}, which reads format {CONFIG_FORMAT}",
+            "install the fourierf version that wrote it, or retrain with this version",
+        )
+    _import_plugins()
+    try:
+        return from_dict(payload["config"], expected)
+    except (ValueError, TypeError, KeyError) as err:
+        fail(
+            f"{path} does not match this fourierf version's config: {err}",
+            "retrain, or use the fourierf version that wrote it",
+        )
+
+
+def _import_plugins() -> None:
+    """Importing the registries makes every built-in config class known to the JSON loader."""
+    import fourierf_plugin.data.parsers
+    import fourierf_plugin.method_configs  # noqa: F401

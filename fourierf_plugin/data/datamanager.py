@@ -1,0 +1,125 @@
+"""Turns parser outputs into ray batches: every training pixel's ray, shuffled each epoch, and whole eval images."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import torch
+from torch import Tensor
+
+from fourierf_plugin.configs.base import InstantiateConfig
+from fourierf_plugin.data.dataparser_base import DataparserOutputs, Split
+from fourierf_plugin.data.parsers import DataParserUnion, default_dataparser
+from fourierf_plugin.utils.errors import fail
+
+
+@dataclass
+class RayBatch:
+    origins: Tensor  # [R, 3]
+    directions: Tensor  # [R, 3] unit
+    rgba: Tensor  # [R, 4] premultiplied colour + alpha
+
+
+@dataclass
+class EvalView:
+    name: str
+    view_id: int
+    rays: RayBatch
+    height: int
+    width: int
+
+
+def all_rays(outputs: DataparserOutputs, device: torch.device) -> RayBatch:
+    """Rays and targets of every pixel of every image of a split, image by image, row-major."""
+    origins, directions = zip(*(outputs.cameras.generate_rays(i) for i in range(len(outputs.cameras))), strict=True)
+    return RayBatch(
+        torch.cat(origins).to(device),
+        torch.cat(directions).to(device),
+        outputs.images.reshape(-1, 4).to(device),
+    )
+
+
+class DataManager:
+    """Owns the training rays (and which of them are still active) and serves eval images on demand."""
+
+    config: DataManagerConfig
+
+    def __init__(
+        self, config: DataManagerConfig, device: torch.device, generator: torch.Generator, load_train: bool = True
+    ):
+        self.config = config
+        self.device = device
+        self.generator = generator
+        self.parser = config.dataparser.setup()
+        self.train_outputs: DataparserOutputs | None = None
+        self.train_rays: RayBatch | None = None
+        self.active = torch.zeros(0, dtype=torch.long)
+        self._order = torch.zeros(0, dtype=torch.long)
+        self._cursor = 0
+        if load_train:
+            self.train_outputs = self.parser.get_outputs("train")
+            self.train_rays = all_rays(self.train_outputs, device)
+            self.active = torch.arange(self.train_rays.origins.shape[0])
+
+    @property
+    def reference_outputs(self) -> DataparserOutputs:
+        """The split that defines the scene (box, near/far, declaration) for the model."""
+        if self.train_outputs is None:
+            self.train_outputs = self.parser.get_outputs("train")
+        return self.train_outputs
+
+    def keep_rays(self, keep: Callable[[Tensor, Tensor], Tensor]) -> int:
+        """Drop training rays for which ``keep(origins, directions)`` is False; returns how many remain."""
+        assert self.train_rays is not None
+        mask = keep(self.train_rays.origins[self.active], self.train_rays.directions[self.active]).cpu()
+        if not bool(mask.any()):
+            return int(self.active.numel())  # never filter down to nothing; the caller warns
+        self.active = self.active[mask]
+        self._order = torch.zeros(0, dtype=torch.long)
+        self._cursor = 0
+        return int(self.active.numel())
+
+    def next_batch(self) -> RayBatch:
+        """A batch of training rays; a fresh permutation each epoch, the tail of an epoch dropped."""
+        assert self.train_rays is not None
+        size = min(self.config.rays_per_batch, int(self.active.numel()))
+        if size == 0:
+            fail("no training rays left", "check the scene box and near/far planes of the dataset")
+        if self._cursor + size > self._order.numel():
+            self._order = self.active[torch.randperm(self.active.numel(), generator=self.generator)]
+            self._cursor = 0
+        idx = self._order[self._cursor : self._cursor + size].to(self.device)
+        self._cursor += size
+        r = self.train_rays
+        return RayBatch(r.origins[idx], r.directions[idx], r.rgba[idx])
+
+    def eval_views(self, split: Split) -> Iterator[EvalView]:
+        outputs = self.parser.get_outputs(split)
+        for i in range(len(outputs.cameras)):
+            o, d = outputs.cameras.generate_rays(i)
+            rgba = outputs.images[i].reshape(-1, 4)
+            yield EvalView(
+                outputs.image_names[i],
+                outputs.view_ids[i],
+                RayBatch(o.to(self.device), d.to(self.device), rgba.to(self.device)),
+                outputs.cameras.height,
+                outputs.cameras.width,
+            )
+
+    def state_dict(self) -> dict:
+        return {"active": self.active.clone(), "order": self._order.clone(), "cursor": self._cursor}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.active = state["active"].long()
+        self._order = state["order"].long()
+        self._cursor = int(state["cursor"])
+
+
+@dataclass
+class DataManagerConfig(InstantiateConfig):
+    _target: ClassVar[type] = DataManager
+    dataparser: DataParserUnion = field(default_factory=default_dataparser)
+    rays_per_batch: int = 4096
+    """Training rays per iteration."""

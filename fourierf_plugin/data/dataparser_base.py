@@ -1,0 +1,70 @@
+"""The narrow waist between dataset formats and the model: images, cameras, a box, and what the scene needs."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from torch import Tensor
+
+from fourierf_plugin.cameras.cameras import Cameras
+from fourierf_plugin.configs.base import InstantiateConfig
+
+Split = Literal["train", "val", "test"]
+Background = Literal["white", "black", "random"]
+RaySpace = Literal["euclidean", "ndc"]
+
+
+@dataclass(frozen=True)
+class SceneDeclaration:
+    """What a scene calls for; the model builds only these pieces.
+
+    A parser declares them from what it knows about the data (RGBA synthetic renders want a white background,
+    forward-facing photos want NDC rays and occlusion regularisation); the model config can override each one.
+    """
+
+    background: Background = "white"
+    ray_space: RaySpace = "euclidean"
+    bounded: bool = True
+    view_dependent: bool = False
+    occlusion_regularization: bool = False
+
+
+@dataclass
+class DataparserOutputs:
+    """One split of a scene, already resized.
+
+    ``images`` is [N, H, W, 4] float32 in [0, 1]: colour *premultiplied* by alpha, then alpha (1 for opaque
+    photos). The model composites ``rgb + (1 - alpha) * background``, so resizing and backgrounds stay exact.
+    """
+
+    images: Tensor
+    cameras: Cameras
+    image_names: list[str]  # the view identifiers as the dataset names them (e.g. "r_27"), for views.json
+    view_ids: list[int]  # indices into the full split, in the same order as ``images``
+    scene_box: Tensor  # [2, 3] axis-aligned bounding box (min, max)
+    near: float
+    far: float
+    declaration: SceneDeclaration
+    scene_name: str
+    source_files: list[Path] = field(default_factory=list)
+
+
+@dataclass
+class DataParserConfig(InstantiateConfig):
+    """Base for dataset-format configs. ``data`` is filled from the trainer's ``--data``."""
+
+    data: Path = Path(".")
+
+
+class DataParser:
+    """Reads one dataset format; ``get_outputs(split)`` returns a :class:`DataparserOutputs`."""
+
+    config: DataParserConfig
+
+    def __init__(self, config: DataParserConfig) -> None:
+        self.config = config
+
+    def get_outputs(self, split: Split) -> DataparserOutputs:  # pragma: no cover - interface
+        raise NotImplementedError

@@ -1,0 +1,239 @@
+"""Training loop: seeding, device, run directory, schedules, checkpoints (atomic, resumable), Ctrl-C safety."""
+
+from __future__ import annotations
+
+import json
+import random
+import signal
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import ClassVar, Literal
+
+import numpy as np
+import torch
+
+from fourierf_plugin import __version__
+from fourierf_plugin.configs.base import InstantiateConfig, load_config, save_config
+from fourierf_plugin.engine.checkpoint import load_latest_checkpoint, save_checkpoint
+from fourierf_plugin.engine.optimizers import OptimizerConfig, build_optimizer, set_learning_rates
+from fourierf_plugin.engine.run_dir import make_run_dir
+from fourierf_plugin.pipelines.base import Pipeline, PipelineConfig
+from fourierf_plugin.utils.console import TrainingProgress, append_jsonl, format_duration, get_console
+from fourierf_plugin.utils.errors import fail
+
+
+def pick_device(choice: str) -> torch.device:
+    """CUDA when available (or asked for), else CPU."""
+    if choice == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if choice == "cuda" and not torch.cuda.is_available():
+        fail("--device cuda was asked for but no CUDA device is available", "use --device auto or --device cpu")
+    return torch.device(choice)
+
+
+def seed_everything(seed: int) -> torch.Generator:
+    """Seed python, numpy and torch; return the generator that drives every random draw of a run."""
+    random.seed(seed)
+    np.random.seed(seed % 2**32)
+    torch.manual_seed(seed)
+    return torch.Generator().manual_seed(seed)
+
+
+class _DeferredInterrupt:
+    """First Ctrl-C asks the loop to stop at the end of the current step (and save); a second one aborts."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous = None
+
+    def __enter__(self) -> _DeferredInterrupt:
+        try:
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+        except ValueError:  # not the main thread: leave signals alone
+            self._previous = None
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def __exit__(self, *exc) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+
+
+class Trainer:
+    config: TrainerConfig
+
+    def __init__(self, config: TrainerConfig) -> None:
+        self.config = config
+        self.console = get_console()
+        self.start_step = 0
+        self.resume_state: dict | None = None
+        c = config
+        if c.max_num_iterations < 1:
+            fail(f"--max-num-iterations must be at least 1, got {c.max_num_iterations}", "pass a positive number")
+        if c.load_dir is not None:
+            self._prepare_resume(c.load_dir)
+            c = self.config
+        if c.threads is not None:
+            torch.set_num_threads(c.threads)
+        self.device = pick_device(c.device)
+        self.generator = seed_everything(c.seed)
+        self.pipeline: Pipeline = c.pipeline.setup(
+            device=self.device, max_iters=c.max_num_iterations, generator=self.generator
+        )
+        if self.resume_state is None:
+            scene = self.pipeline.datamanager.reference_outputs
+            self.run_dir = make_run_dir(c.output_dir, scene.scene_name, c.method_name, c.timestamp)
+        else:
+            assert c.load_dir is not None
+            self.run_dir = Path(c.load_dir)
+        self.checkpoint_dir = self.run_dir / "checkpoints"
+        self.checkpoint_dir.mkdir(exist_ok=True)
+        save_config(c, self.run_dir / "config.json")
+        self._write_views()
+        self._announce()
+
+    # -- set-up ---------------------------------------------------------------------------------------------------
+    def _prepare_resume(self, load_dir: Path) -> None:
+        saved = load_config(load_dir, TrainerConfig)
+        if saved.method_name != self.config.method_name:
+            fail(
+                f"{load_dir} holds a '{saved.method_name}' run, but '{self.config.method_name}' was asked to resume it",
+                f"run: fourierf-train {saved.method_name} --load-dir {load_dir}",
+            )
+        _, state = load_latest_checkpoint(Path(load_dir) / "checkpoints")
+        saved.load_dir = Path(load_dir)
+        self.config = saved
+        self.resume_state = state
+        self.start_step = int(state["step"])
+
+    def _write_views(self) -> None:
+        scene = self.pipeline.datamanager.reference_outputs
+        record = {"scene": scene.scene_name, "train_view_ids": scene.view_ids, "train_image_names": scene.image_names}
+        (self.run_dir / "views.json").write_text(json.dumps(record, indent=2) + "\n")
+
+    def _announce(self) -> None:
+        scene = self.pipeline.datamanager.reference_outputs
+        model = self.pipeline.model
+        d = scene.declaration
+        self.console.print(
+            f"[bold]{self.config.method_name}[/bold] on {scene.scene_name}: run directory {self.run_dir}"
+        )
+        self.console.print(f"training views ({len(scene.view_ids)}): {', '.join(scene.image_names)}")
+        self.console.print(
+            f"scene effects: background={model.background}, rays={d.ray_space}, "
+            f"{'bounded' if d.bounded else 'unbounded'}, view-dependent={'yes' if model.view_dependent else 'no'}, "
+            f"occlusion-regularisation={'yes' if d.occlusion_regularization else 'no'}"
+        )
+        self.console.print(
+            f"device {self.device}, grid {model.field.resolution}, {self.config.max_num_iterations} iterations, "
+            f"occupancy updates after {model.occupancy_steps}, upsamples after {model.upsample_steps}"
+        )
+        if self.start_step:
+            self.console.print(f"resuming at step {self.start_step}")
+
+    # -- checkpoints ----------------------------------------------------------------------------------------------
+    def _state(self, step: int, optimizer: torch.optim.Optimizer) -> dict:
+        return {
+            "step": step,
+            "fourierf_version": __version__,
+            "pipeline": self.pipeline.state_dict(),
+            "optimizer": optimizer.state_dict(),
+            "generator": self.generator.get_state(),
+            "torch_rng": torch.get_rng_state(),
+        }
+
+    def save(self, step: int, optimizer: torch.optim.Optimizer) -> Path:
+        return save_checkpoint(self._state(step, optimizer), self.checkpoint_dir, step, self.config.keep_checkpoints)
+
+    def _restore(self, state: dict) -> torch.optim.Optimizer:
+        self.pipeline.load_state_dict(state["pipeline"])
+        optimizer = build_optimizer(self.config.optimizer, self.pipeline.model.param_groups())
+        optimizer.load_state_dict(state["optimizer"])
+        self.generator.set_state(state["generator"])
+        torch.set_rng_state(state["torch_rng"])
+        return optimizer
+
+    # -- loop -------------------------------------------------------------------------------------------------------
+    def train(self) -> Path:
+        c = self.config
+        model = self.pipeline.model
+        if self.resume_state is not None:
+            optimizer = self._restore(self.resume_state)
+        else:
+            optimizer = build_optimizer(c.optimizer, model.param_groups())
+        reset_steps = [s + 1 for s in model.reset_steps()]
+        metrics_path = self.run_dir / "metrics.jsonl"
+        started = time.perf_counter()
+        done = self.start_step
+        with _DeferredInterrupt() as interrupt, TrainingProgress(c.max_num_iterations, self.start_step) as progress:
+            for step in range(self.start_step, c.max_num_iterations):
+                lr_scale = set_learning_rates(optimizer, c.optimizer, step, reset_steps, c.max_num_iterations)
+                loss, metrics = self.pipeline.train_step(step)
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                optimizer.step()
+                changes = self.pipeline.after_step(step)
+                if changes.params_replaced:
+                    optimizer = build_optimizer(c.optimizer, model.param_groups())
+                done = step + 1
+                f_density, f_color = model.cutoffs(step)
+                progress.update(done, loss=metrics["loss"], psnr=metrics["psnr"], f=f_density)
+                if done % c.log_every == 0 or done == c.max_num_iterations:
+                    record = {"step": done, **metrics, "f_density": f_density, "f_color": f_color, "lr_scale": lr_scale}
+                    record["elapsed_s"] = time.perf_counter() - started
+                    record["rays"] = int(self.pipeline.datamanager.active.numel())
+                    append_jsonl(metrics_path, record)
+                if done % c.steps_per_save == 0 or done == c.max_num_iterations:
+                    self.save(done, optimizer)
+                if interrupt.requested:
+                    break
+        elapsed = time.perf_counter() - started
+        if done < c.max_num_iterations:
+            path = self.save(done, optimizer)
+            self.console.print(f"interrupted at step {done}: saved {path}")
+            self.console.print(f"resume with: fourierf-train {c.method_name} --load-dir {self.run_dir}")
+            raise SystemExit(130)
+        append_jsonl(metrics_path, {"event": "done", "step": done, "train_seconds": elapsed})
+        self.console.print(
+            f"trained {done - self.start_step} iterations in {format_duration(elapsed)}; run in {self.run_dir}"
+        )
+        self.console.print(f"evaluate with: fourierf-eval --load-config {self.run_dir / 'config.json'}")
+        return self.run_dir
+
+
+@dataclass
+class TrainerConfig(InstantiateConfig):
+    """A complete training run: the method preset plus everything a user may override."""
+
+    _target: ClassVar[type] = Trainer
+    method_name: str = "fourierf-vm"
+    """Name of the preset (used in the run directory)."""
+    pipeline: PipelineConfig = field(default_factory=PipelineConfig)
+    optimizer: OptimizerConfig = field(default_factory=OptimizerConfig)
+    data: Path | None = None
+    """Scene folder (copied into the dataparser's data path)."""
+    output_dir: Path = Path("outputs")
+    """Runs go to OUTPUT_DIR/<scene>/<method>/<timestamp>/."""
+    max_num_iterations: int = 10000
+    """Training iterations; every schedule is a fraction of this."""
+    seed: int = 20211202
+    """Seed of every random draw (initialisation, ray batches, jitter)."""
+    device: Literal["auto", "cpu", "cuda"] = "auto"
+    """Where to train: auto picks CUDA when available."""
+    threads: int | None = None
+    """CPU threads for torch (None: torch's default)."""
+    steps_per_save: int = 1000
+    """Checkpoint every N iterations (and at the end, and on Ctrl-C)."""
+    keep_checkpoints: int = 3
+    """How many recent checkpoints to keep."""
+    log_every: int = 50
+    """Append training metrics to metrics.jsonl every N iterations."""
+    load_dir: Path | None = None
+    """Resume the run in this directory from its latest checkpoint (its config.json is used)."""
+    timestamp: str | None = None
+    """Run directory name (default: the current time)."""

@@ -1,0 +1,124 @@
+"""The FourieRF field: TensoRF density and appearance grids read through their Fourier-filtered copies.
+
+``prepare(f_density, f_color)`` filters every factor once (with autograd when training) and caches the result;
+every lookup and regulariser of that iteration reuses it. Any resize invalidates the cache, so a stale grid of the
+old shape can never be read.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from fourierf_plugin.field_components.decoder import AppearanceDecoder
+from fourierf_plugin.field_components.fourier import filter_lines, filter_planes
+from fourierf_plugin.field_components.tensor_grids import TensorCP, TensorGrid, TensorVM
+
+
+@dataclass
+class FilteredGrids:
+    density_planes: list[Tensor]
+    density_lines: list[Tensor]
+    appearance_planes: list[Tensor]
+    appearance_lines: list[Tensor]
+
+
+@dataclass
+class FieldConfig:
+    """Shape of the radiance field; the CP swap is ``decomposition: cp``."""
+
+    decomposition: Literal["vm", "cp"] = "vm"
+    """VM (planes x lines, the paper's default) or CP (lines only)."""
+    density_components: tuple[int, int, int] = (16, 16, 16)
+    """Components per plane/line group for density (CP: all three equal)."""
+    appearance_components: tuple[int, int, int] = (48, 48, 48)
+    """Components per plane/line group for appearance (CP: all three equal)."""
+    appearance_dim: int = 27
+    """Width of the appearance feature fed to the decoder."""
+    hidden_dim: int = 128
+    """Decoder width."""
+    init_scale: float | None = None
+    """Std of the initial grid values; None = TensoRF's 0.1 (VM) / 0.2 (CP)."""
+    density_shift: float = -10.0
+    """Added to the density feature before the activation (softplus(x - 10) ≈ 4.5e-5 at 0)."""
+    density_activation: Literal["softplus", "relu"] = "softplus"
+    """Density activation; TensoRF uses softplus for synthetic and ReLU for LLFF scenes."""
+    n_voxels_init: int = 128**3
+    """Voxel budget at the start (per-axis resolution follows the box's aspect ratio)."""
+    n_voxels_final: int = 300**3
+    """Voxel budget after the last upsample."""
+    upsample_fractions: tuple[float, ...] = (0.3, 0.7)
+    """When to upsample, as fractions of the run (log-spaced voxel counts)."""
+
+
+class FourierTensoRFField(nn.Module):
+    def __init__(
+        self, config: FieldConfig, aabb: Tensor, reso: list[int], view_dependent: bool, generator: torch.Generator
+    ) -> None:
+        super().__init__()
+        self.config = config
+        grid_cls = TensorVM if config.decomposition == "vm" else TensorCP
+        init = config.init_scale if config.init_scale is not None else (0.1 if config.decomposition == "vm" else 0.2)
+        self.density_grid: TensorGrid = grid_cls(reso, config.density_components, init, generator)
+        self.appearance_grid: TensorGrid = grid_cls(reso, config.appearance_components, init, generator)
+        app_in = sum(config.appearance_components) if config.decomposition == "vm" else config.appearance_components[0]
+        self.basis = nn.Linear(app_in, config.appearance_dim, bias=False)
+        self.decoder = AppearanceDecoder(config.appearance_dim, config.hidden_dim, view_dependent)
+        self.register_buffer("aabb", aabb.detach().clone().float())
+        self._filtered: FilteredGrids | None = None
+
+    # -- filtering --------------------------------------------------------------------------------------------
+    def filtered_grids(
+        self, f_density: float, f_color: float, plane_leakage: float = 0.0, app_planes_follow_density: bool = False
+    ) -> FilteredGrids:
+        """Low-pass every factor at the given cutoffs (identity at f = 1)."""
+        f_app_planes = f_density if app_planes_follow_density else f_color
+        d, a = self.density_grid, self.appearance_grid
+        return FilteredGrids(
+            density_planes=[filter_planes(p, f_density, plane_leakage) for p in d.planes],
+            density_lines=[filter_lines(line, f_density) for line in d.lines],
+            appearance_planes=[filter_planes(p, f_app_planes, plane_leakage) for p in a.planes],
+            appearance_lines=[filter_lines(line, f_color) for line in a.lines],
+        )
+
+    def prepare(self, f_density: float, f_color: float, plane_leakage: float = 0.0, app_follow: bool = False) -> None:
+        """Filter once for this iteration (or this evaluation) and cache the result for every lookup."""
+        self._filtered = self.filtered_grids(f_density, f_color, plane_leakage, app_follow)
+
+    def invalidate(self) -> None:
+        self._filtered = None
+
+    @property
+    def filtered(self) -> FilteredGrids:
+        if self._filtered is None:
+            raise RuntimeError("field.prepare(...) must run before lookups (and after every resize)")
+        return self._filtered
+
+    # -- geometry ---------------------------------------------------------------------------------------------
+    @property
+    def resolution(self) -> list[int]:
+        return self.density_grid.resolution
+
+    def normalize(self, xyz: Tensor) -> Tensor:
+        """World points to the grid's [-1, 1]³ (align_corners=True: the box corners are grid vertices)."""
+        return (xyz - self.aabb[0]) * (2.0 / (self.aabb[1] - self.aabb[0])) - 1.0
+
+    # -- queries ----------------------------------------------------------------------------------------------
+    def density(self, xyz: Tensor) -> Tensor:
+        """Volume density σ ≥ 0 at world points [N, 3] -> [N]."""
+        g = self.filtered
+        x = self.normalize(xyz)
+        feats = self.density_grid.features(g.density_planes, g.density_lines, x)
+        raw = torch.stack([f.sum(dim=-1) for f in feats]).sum(dim=0) + self.config.density_shift
+        return F.softplus(raw) if self.config.density_activation == "softplus" else F.relu(raw)
+
+    def rgb(self, xyz: Tensor, directions: Tensor | None) -> Tensor:
+        """Colour in [0, 1] at world points [N, 3] (directions unit [N, 3], used only when view-dependent)."""
+        g = self.filtered
+        x = self.normalize(xyz)
+        feats = self.appearance_grid.features(g.appearance_planes, g.appearance_lines, x)
+        return self.decoder(self.basis(torch.cat(feats, dim=-1)), directions)

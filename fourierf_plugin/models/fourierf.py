@@ -1,0 +1,332 @@
+"""FourieRF model: fixed-step sampler over the occupancy grid, the Fourier-filtered field, compositing, losses.
+
+All schedules (cutoffs, L1 weight, upsample and occupancy-update steps) are functions of the step and the run
+length; the model changes its own structure in ``after_step`` and tells the caller when parameters were replaced
+so the optimiser can be rebuilt. It never reaches into the trainer.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import ClassVar, Literal
+
+import torch
+from torch import Tensor, nn
+
+from fourierf_plugin.configs.base import InstantiateConfig
+from fourierf_plugin.data.dataparser_base import Background, SceneDeclaration
+from fourierf_plugin.field_components import schedules
+from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig, FourierTensoRFField
+from fourierf_plugin.model_components import losses
+from fourierf_plugin.model_components.occupancy import (
+    OccupancyGrid,
+    occupancy_from_alpha,
+    occupied_aabb,
+    shrink_bounds,
+    vertex_grid,
+)
+from fourierf_plugin.model_components.ray_sampling import ray_box_span, sample_deltas, step_samples
+from fourierf_plugin.model_components.rendering import (
+    accumulate,
+    background_color,
+    blend_background,
+    composite_target,
+    composite_weights,
+    expected_depth,
+)
+from fourierf_plugin.utils.console import get_console
+
+
+@dataclass
+class FourierConfig:
+    """The frequency curriculum: the kept share of the spectrum grows linearly from f0 to 1."""
+
+    enabled: bool = True
+    """False gives plain TensoRF (masks off) with the identical pipeline."""
+    f0_density: float = 0.3
+    """Initial cutoff for the density grids (paper, synthetic: 0.3; real: 0.01)."""
+    f0_color: float = 0.3
+    """Initial cutoff for the appearance grids."""
+    ramp_fraction: float = 0.2
+    """Fraction of the run after which the cutoff is fully open (paper, synthetic: 2000 of 10k iterations)."""
+    plane_leakage: float = 0.0
+    """Weight kept on out-of-band plane coefficients; the paper zeroes them, the official code keeps 1e-6."""
+    app_planes_follow_density: bool = False
+    """Official-code behaviour: appearance planes use the density cutoff instead of the colour cutoff."""
+
+
+@dataclass
+class Changes:
+    """What ``after_step`` did, so the pipeline and trainer can follow."""
+
+    params_replaced: bool = False
+    filter_rays: bool = False
+
+
+class FourieRFModel(nn.Module):
+    config: FourieRFModelConfig
+
+    def __init__(
+        self,
+        config: FourieRFModelConfig,
+        scene_box: Tensor,
+        near: float,
+        far: float,
+        declaration: SceneDeclaration,
+        max_iters: int,
+        generator: torch.Generator,
+    ) -> None:
+        super().__init__()
+        self.config = config
+        self.near, self.far = float(near), float(far)
+        self.max_iters = int(max_iters)
+        self.generator = generator
+        self.background: Background = config.background or declaration.background
+        self.view_dependent = declaration.view_dependent if config.view_dependent is None else config.view_dependent
+        fc = config.field
+        self.upsample_steps = (
+            schedules.steps_from_fractions(fc.upsample_fractions, max_iters) if fc.upsample_fractions else []
+        )
+        self.voxel_targets = schedules.voxel_counts(fc.n_voxels_init, fc.n_voxels_final, len(self.upsample_steps))
+        frac = config.occupancy_update_fractions
+        self.occupancy_steps = schedules.steps_from_fractions(frac, max_iters) if frac else []
+        reso = schedules.n_to_reso(fc.n_voxels_init, (scene_box[1] - scene_box[0]).tolist())
+        self.field = FourierTensoRFField(fc, scene_box, reso, self.view_dependent, generator)
+        self.occupancy = OccupancyGrid()
+
+    # -- schedules (pure functions of the step) ---------------------------------------------------------------
+    def cutoffs(self, step: int) -> tuple[float, float]:
+        fc = self.config.fourier
+        if not fc.enabled:
+            return 1.0, 1.0
+        ramp = round(fc.ramp_fraction * self.max_iters)
+        return schedules.cutoff_at(step, fc.f0_density, ramp), schedules.cutoff_at(step, fc.f0_color, ramp)
+
+    def reset_steps(self) -> list[int]:
+        """Steps after which parameters are replaced (and the optimiser restarts at the initial lr)."""
+        return sorted(set(self.upsample_steps) | set(self.occupancy_steps))
+
+    def l1_weight(self, step: int) -> float:
+        # The switch happens after the first update's own step, i.e. from the next step on.
+        first = self.occupancy_steps[0] + 1 if self.occupancy_steps else None
+        return schedules.l1_weight_at(step, first, self.config.l1_weight_initial, self.config.l1_weight_rest)
+
+    # -- derived sampling parameters (from the current box and resolution) ------------------------------------
+    @property
+    def aabb(self) -> Tensor:
+        return self.field.aabb
+
+    def _box_size(self) -> list[float]:
+        return (self.aabb[1] - self.aabb[0]).tolist()
+
+    @property
+    def step_size(self) -> float:
+        return schedules.step_size(self._box_size(), self.field.resolution, self.config.step_ratio)
+
+    def samples_per_ray(self, training: bool) -> int:
+        if training:
+            return schedules.train_samples_per_ray(self.field.resolution, self.config.step_ratio)
+        return schedules.eval_samples_per_ray(self._box_size(), self.step_size)
+
+    # -- forward ----------------------------------------------------------------------------------------------
+    def prepare(self, step: int) -> None:
+        """Filter the grids at this step's cutoffs once; call before ``forward`` (under no_grad for eval)."""
+        f_d, f_c = self.cutoffs(step)
+        fc = self.config.fourier
+        self.field.prepare(f_d, f_c, fc.plane_leakage, fc.app_planes_follow_density)
+
+    def forward(self, origins: Tensor, directions: Tensor, training: bool, background: Tensor | None = None) -> dict:
+        """Render rays [R, 3] (unit directions). Returns rgb [R, 3], accumulation [R], depth [R]."""
+        num_rays = origins.shape[0]
+        device = origins.device
+        if background is None:
+            background = background_color(
+                self.background if training else self._eval_background(), num_rays, device, self.generator
+            )
+        start, t_exit = ray_box_span(origins, directions, self.aabb, self.near, self.far)
+        step = self.step_size
+        span = ((t_exit - start) / step).clamp(min=0)
+        needed = math.ceil(float(span.max())) + 1 if num_rays else 0
+        num_samples = max(1, min(self.samples_per_ray(training), needed))
+        jitter = torch.rand(num_rays, generator=self.generator).to(device) if training else None
+        t = step_samples(start, step, num_samples, jitter)
+        inside = t < t_exit.unsqueeze(-1)
+        xyz = origins.unsqueeze(1) + directions.unsqueeze(1) * t.unsqueeze(-1)
+        valid = inside.clone()
+        if self.occupancy.active and inside.any():
+            valid[inside] = self.occupancy.query(xyz[inside])
+        sigma = torch.zeros_like(t)
+        if valid.any():
+            sigma = sigma.index_put((valid,), self.field.density(xyz[valid]))
+        weights = composite_weights(sigma, sample_deltas(t), self.config.distance_scale)
+
+        shade = weights.detach() > self.config.weight_threshold
+        colors = torch.zeros(num_rays, num_samples, 3, device=device, dtype=t.dtype)
+        if shade.any():
+            dirs = directions.unsqueeze(1).expand_as(xyz)[shade] if self.view_dependent else None
+            colors = colors.index_put((shade,), self.field.rgb(xyz[shade], dirs))
+        acc = weights.sum(dim=-1)
+        rgb = blend_background(accumulate(weights, colors), acc, background)
+        if not training:
+            rgb = rgb.clamp(0.0, 1.0)
+        depth = expected_depth(weights, t, torch.full_like(acc, self.far))
+        return {"rgb": rgb, "accumulation": acc, "depth": depth, "background": background}
+
+    def _eval_background(self) -> Background:
+        return "white" if self.background == "random" else self.background
+
+    def loss_dict(self, outputs: dict, target_rgba: Tensor, step: int) -> dict[str, Tensor]:
+        """Photometric MSE plus the regularisers, all on this iteration's filtered grids."""
+        target = composite_target(target_rgba, outputs["background"])
+        g = self.field.filtered
+        c = self.config
+        out = {"mse": losses.mse(outputs["rgb"], target)}
+        if c.tv_weight_density > 0:
+            out["tv_density"] = c.tv_weight_density * losses.grid_tv(g.density_planes, g.density_lines)
+        if c.tv_weight_appearance > 0:
+            out["tv_appearance"] = c.tv_weight_appearance * losses.grid_tv(g.appearance_planes, g.appearance_lines)
+        l1 = self.l1_weight(step)
+        if l1 > 0:
+            out["l1_density"] = l1 * losses.density_l1(g.density_planes, g.density_lines)
+        return out
+
+    @torch.no_grad()
+    def render_rays(
+        self, origins: Tensor, directions: Tensor, step: int, chunk: int | None = None
+    ) -> dict[str, Tensor]:
+        """Evaluation render in chunks (no jitter, clamped colour) at the cutoffs of ``step``."""
+        self.prepare(step)
+        chunk = chunk or self.config.eval_chunk_rays
+        parts = [
+            self.forward(origins[i : i + chunk], directions[i : i + chunk], training=False)
+            for i in range(0, origins.shape[0], chunk)
+        ]
+        return {k: torch.cat([p[k] for p in parts]) for k in ("rgb", "accumulation", "depth")}
+
+    # -- structure changes --------------------------------------------------------------------------------------
+    @torch.no_grad()
+    def after_step(self, step: int) -> Changes:
+        """Occupancy updates (the first shrinks the box, the second asks for ray filtering) and upsamples."""
+        changes = Changes()
+        if step in self.occupancy_steps:
+            self.prepare(step + 1)
+            first = step == self.occupancy_steps[0]
+            self._update_occupancy(shrink=first)
+            changes.params_replaced = True
+            changes.filter_rays = len(self.occupancy_steps) > 1 and step == self.occupancy_steps[1]
+        if step in self.upsample_steps:
+            self.prepare(step + 1)
+            target = self.voxel_targets[self.upsample_steps.index(step)]
+            self._upsample(schedules.n_to_reso(target, self._box_size()))
+            changes.params_replaced = True
+        if changes.params_replaced:
+            self.field.invalidate()
+        return changes
+
+    def _dense_alpha(self, reso: list[int], chunk: int = 65536) -> Tensor:
+        """Alpha 1 - exp(-σ step) at the grid vertices (TensoRF's mask criterion, no distance scale)."""
+        xyz = vertex_grid(self.aabb, reso).reshape(-1, 3)
+        alpha = torch.zeros(xyz.shape[0], device=xyz.device)
+        step = self.step_size
+        for i in range(0, xyz.shape[0], chunk):
+            pts = xyz[i : i + chunk]
+            keep = self.occupancy.query(pts)
+            if keep.any():
+                sigma = self.field.density(pts[keep])
+                alpha[i : i + chunk][keep] = -torch.expm1(-sigma * step)
+        return alpha.view(*reso)
+
+    def _update_occupancy(self, shrink: bool) -> None:
+        reso = self.field.resolution
+        vertices = occupancy_from_alpha(self._dense_alpha(reso), self.config.occupancy_threshold)
+        box = occupied_aabb(vertices, self.aabb)
+        if box is None:
+            get_console().print(
+                "[yellow]warning:[/yellow] the occupancy grid is empty (no density above the threshold); "
+                "keeping the previous box and sampling everywhere"
+            )
+            return
+        self.occupancy.set(vertices, self.aabb)
+        if shrink:
+            lo, hi, new_box = shrink_bounds(box, self.aabb, reso)
+            for grid in (self.field.density_grid, self.field.appearance_grid):
+                grid.replace(*grid.cropped(lo, hi))
+            self.field.aabb = new_box
+
+    def _upsample(self, reso: list[int]) -> None:
+        """Replace each raw factor by the bilinear upsample of its *filtered* version (out-of-band is dropped)."""
+        g = self.field.filtered
+        for grid, planes, lines in (
+            (self.field.density_grid, g.density_planes, g.density_lines),
+            (self.field.appearance_grid, g.appearance_planes, g.appearance_lines),
+        ):
+            grid.replace(*grid.upsampled(planes, lines, reso))
+
+    @torch.no_grad()
+    def rays_hit_occupancy(
+        self, origins: Tensor, directions: Tensor, num_samples: int = 256, chunk: int = 8192
+    ) -> Tensor:
+        """Bool [R]: the ray passes through an occupied cell at any of ``num_samples`` evenly spaced points."""
+        keep = torch.zeros(origins.shape[0], dtype=torch.bool, device=origins.device)
+        for i in range(0, origins.shape[0], chunk):
+            o, d = origins[i : i + chunk], directions[i : i + chunk]
+            start, t_exit = ray_box_span(o, d, self.aabb, self.near, self.far)
+            frac = torch.linspace(0.0, 1.0, num_samples, device=o.device)
+            t = start.unsqueeze(-1) + (t_exit - start).clamp(min=0).unsqueeze(-1) * frac
+            xyz = o.unsqueeze(1) + d.unsqueeze(1) * t.unsqueeze(-1)
+            hit = self.occupancy.query(xyz.reshape(-1, 3)).view(-1, num_samples).any(dim=-1)
+            keep[i : i + chunk] = hit & (t_exit > start)
+        return keep
+
+    # -- parameters and checkpoints -----------------------------------------------------------------------------
+    def param_groups(self) -> dict[str, list[nn.Parameter]]:
+        grids = list(self.field.density_grid.parameters()) + list(self.field.appearance_grid.parameters())
+        networks = list(self.field.basis.parameters()) + list(self.field.decoder.parameters())
+        return {"grids": grids, "networks": networks}
+
+    def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):  # type: ignore[override]
+        """Load a checkpoint taken after any number of upsamples/shrinks: tensors are resized to the saved shapes."""
+        own = dict(self.named_parameters()) | dict(self.named_buffers())
+        for name, value in state_dict.items():
+            if name in own and own[name].shape != value.shape:
+                module_name, _, attr = name.rpartition(".")
+                module = self.get_submodule(module_name)
+                blank = torch.empty_like(value, device=own[name].device)
+                setattr(module, attr, nn.Parameter(blank) if isinstance(own[name], nn.Parameter) else blank)
+        self.field.invalidate()
+        return super().load_state_dict(state_dict, strict=strict, assign=assign)
+
+
+@dataclass
+class FourieRFModelConfig(InstantiateConfig):
+    """Sampler, field, renderer and losses of FourieRF (and of TensoRF with ``fourier.enabled False``)."""
+
+    _target: ClassVar[type] = FourieRFModel
+    field: FieldConfig = dataclasses.field(default_factory=FieldConfig)
+    fourier: FourierConfig = dataclasses.field(default_factory=FourierConfig)
+    occupancy_update_fractions: tuple[float, ...] = (0.2, 0.4)
+    """When to rebuild the occupancy grid (fractions of the run); the first shrinks the box, the second filters rays."""
+    occupancy_threshold: float = 1e-4
+    """Alpha (after a 3³ dilation) above which a grid vertex counts as occupied."""
+    step_ratio: float = 0.5
+    """Sampling step in voxels."""
+    distance_scale: float = 25.0
+    """Multiplies σδ in compositing (TensoRF's distance_scale)."""
+    weight_threshold: float = 1e-4
+    """Colour is evaluated only at samples whose weight exceeds this."""
+    tv_weight_density: float = 1.0
+    """Total-variation weight on the (filtered) density planes."""
+    tv_weight_appearance: float = 1.0
+    """Total-variation weight on the (filtered) appearance planes."""
+    l1_weight_initial: float = 8e-5
+    """Density L1 weight before the first occupancy update."""
+    l1_weight_rest: float = 4e-5
+    """Density L1 weight from the first occupancy update on."""
+    background: Literal["white", "black", "random"] | None = None
+    """Override the background the scene declares (None: as declared; Blender scenes declare white)."""
+    view_dependent: bool | None = None
+    """Override whether colour depends on the view direction (None: as declared; off for few-shot scenes)."""
+    eval_chunk_rays: int = 4096
+    """Rays per chunk when rendering whole images."""

@@ -1,0 +1,121 @@
+"""The pipeline ties the datamanager to the model: one training step, the structural updates, and evaluation."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import torch
+from torch import Tensor
+
+from fourierf_plugin.configs.base import InstantiateConfig
+from fourierf_plugin.data.datamanager import DataManager, DataManagerConfig, EvalView
+from fourierf_plugin.data.dataparser_base import Split
+from fourierf_plugin.models.fourierf import Changes, FourieRFModel, FourieRFModelConfig
+from fourierf_plugin.utils.console import get_console
+from fourierf_plugin.utils.metrics import psnr
+
+
+@dataclass
+class RenderedView:
+    view: EvalView
+    rgb: Tensor  # [H, W, 3]
+    target: Tensor  # [H, W, 3] on the eval background
+    depth: Tensor  # [H, W]
+    accumulation: Tensor  # [H, W]
+    seconds: float
+
+
+class Pipeline:
+    config: PipelineConfig
+
+    def __init__(
+        self,
+        config: PipelineConfig,
+        device: torch.device,
+        max_iters: int,
+        generator: torch.Generator,
+        load_train: bool = True,
+    ) -> None:
+        self.config = config
+        self.device = device
+        self.datamanager: DataManager = config.datamanager.setup(
+            device=device, generator=generator, load_train=load_train
+        )
+        scene = self.datamanager.reference_outputs
+        self.model: FourieRFModel = config.model.setup(
+            scene_box=scene.scene_box.to(device),
+            near=scene.near,
+            far=scene.far,
+            declaration=scene.declaration,
+            max_iters=max_iters,
+            generator=generator,
+        ).to(device)
+        # Record the effective scene effects in the config, so config.json says what actually ran.
+        config.model.background = self.model.background
+        config.model.view_dependent = self.model.view_dependent
+
+    def train_step(self, step: int) -> tuple[Tensor, dict[str, float]]:
+        """Loss for one batch at ``step``; the grids are filtered once here and reused by every term."""
+        batch = self.datamanager.next_batch()
+        self.model.prepare(step)
+        outputs = self.model(batch.origins, batch.directions, training=True)
+        loss_terms = self.model.loss_dict(outputs, batch.rgba, step)
+        loss = torch.stack(list(loss_terms.values())).sum()
+        metrics = {k: float(v.detach()) for k, v in loss_terms.items()}
+        metrics["loss"] = float(loss.detach())
+        metrics["psnr"] = -10.0 * torch.log10(loss_terms["mse"].detach().clamp(min=1e-10)).item()
+        return loss, metrics
+
+    def after_step(self, step: int) -> Changes:
+        changes = self.model.after_step(step)
+        if changes.filter_rays:
+            before = int(self.datamanager.active.numel())
+            after = self.datamanager.keep_rays(self.model.rays_hit_occupancy)
+            get_console().print(f"ray filtering: kept {after} of {before} training rays")
+        return changes
+
+    def render_views(self, split: Split, step: int) -> Iterator[RenderedView]:
+        self.model.eval()
+        bg = self.model._eval_background()
+        background = torch.ones(3, device=self.device) if bg == "white" else torch.zeros(3, device=self.device)
+        for view in self.datamanager.eval_views(split):
+            start = time.perf_counter()
+            out = self.model.render_rays(view.rays.origins, view.rays.directions, step)
+            seconds = time.perf_counter() - start
+            shape = (view.height, view.width)
+            target = view.rays.rgba[:, :3] + (1.0 - view.rays.rgba[:, 3:]) * background
+            yield RenderedView(
+                view,
+                out["rgb"].view(*shape, 3).cpu(),
+                target.view(*shape, 3).cpu(),
+                out["depth"].view(shape).cpu(),
+                out["accumulation"].view(shape).cpu(),
+                seconds,
+            )
+        self.model.train()
+
+    def quick_psnr(self, split: Split, step: int, max_views: int = 2) -> float:
+        values = []
+        for i, r in enumerate(self.render_views(split, step)):
+            values.append(psnr(r.rgb, r.target))
+            if i + 1 >= max_views:
+                break
+        return sum(values) / max(1, len(values))
+
+    def state_dict(self) -> dict:
+        return {"model": self.model.state_dict(), "datamanager": self.datamanager.state_dict()}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.model.load_state_dict(state["model"])
+        if "datamanager" in state and self.datamanager.train_rays is not None:
+            self.datamanager.load_state_dict(state["datamanager"])
+
+
+@dataclass
+class PipelineConfig(InstantiateConfig):
+    _target: ClassVar[type] = Pipeline
+    datamanager: DataManagerConfig = field(default_factory=DataManagerConfig)
+    model: FourieRFModelConfig = field(default_factory=FourieRFModelConfig)

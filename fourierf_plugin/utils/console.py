@@ -1,0 +1,213 @@
+"""Terminal output for training: a rich progress bar on a TTY, plain ANSI-free lines elsewhere, and JSONL logs.
+
+Why two modes: progress bars redraw with escape codes, which turn CI logs, pipes and notebook outputs into noise,
+so anything that is not an interactive terminal gets one plain line every few steps instead.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+from rich.console import Console
+from rich.markup import escape
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    ProgressColumn,
+    Task,
+    TextColumn,
+    TimeRemainingColumn,
+)
+from rich.text import Text
+
+from fourierf_plugin.utils.errors import UserError
+
+_CONSOLE: Console | None = None
+_ERR_CONSOLE: Console | None = None
+
+# Metrics with a natural precision; anything else gets 4 significant digits.
+_METRIC_FORMATS = {"psnr": ".2f", "f": ".3f", "ssim": ".4f", "lpips": ".4f", "lr": ".2e"}
+
+
+def get_console() -> Console:
+    """The shared stdout console (rich looks ``sys.stdout`` up at print time, so redirection still works)."""
+    global _CONSOLE
+    if _CONSOLE is None:
+        _CONSOLE = Console(highlight=False)
+    return _CONSOLE
+
+
+def _get_err_console() -> Console:
+    global _ERR_CONSOLE
+    if _ERR_CONSOLE is None:
+        _ERR_CONSOLE = Console(stderr=True, highlight=False)
+    return _ERR_CONSOLE
+
+
+def warn(msg: str) -> None:
+    """Print one yellow warning line on stderr; ``msg`` is shown literally (paths may contain ``[``)."""
+    _get_err_console().print(f"[bold yellow]warning:[/bold yellow] {escape(msg)}", soft_wrap=True)
+
+
+def format_duration(seconds: float) -> str:
+    """Compact human duration: ``45.2s``, ``1m05s``, ``2h03m``, ``3d04h``; ``?`` when unknown (NaN, inf, < 0)."""
+    if not math.isfinite(seconds) or seconds < 0:
+        return "?"
+    if round(seconds, 1) < 60:
+        return f"{seconds:.1f}s"
+    total_s = round(seconds)
+    if total_s < 3600:
+        minutes, secs = divmod(total_s, 60)
+        return f"{minutes}m{secs:02d}s"
+    total_min = round(seconds / 60)
+    if total_min < 24 * 60:
+        hours, minutes = divmod(total_min, 60)
+        return f"{hours}h{minutes:02d}m"
+    days, hours = divmod(round(seconds / 3600), 24)
+    return f"{days}d{hours:02d}h"
+
+
+def format_metrics(metrics: dict[str, Any]) -> str:
+    """``loss 0.0123 psnr 21.45 f 0.650``: every metric given, in the given order, compactly."""
+    parts = []
+    for key, value in metrics.items():
+        if isinstance(value, int) and not isinstance(value, bool):
+            parts.append(f"{key} {value}")
+            continue
+        number = float(value)
+        spec = _METRIC_FORMATS.get(key, ".4g")
+        parts.append(f"{key} {number:{spec}}")
+    return " ".join(parts)
+
+
+class _RateColumn(ProgressColumn):
+    """Iterations per second over this session (rich only samples advances, so a resumed start is not counted)."""
+
+    def render(self, task: Task) -> Text:
+        speed = task.speed
+        return Text("-- it/s" if not speed else f"{speed:.1f} it/s", style="progress.data.speed")
+
+
+class TrainingProgress:
+    """Training progress: a rich bar on a terminal, plain lines otherwise.
+
+    ``update(step, **metrics)`` takes ``step`` = iterations completed so far (``1 .. total_steps``); steps before
+    ``start_step`` (a resumed run) count as done but not towards the speed/ETA, which only measure this session.
+    """
+
+    def __init__(
+        self,
+        total_steps: int,
+        start_step: int = 0,
+        interactive: bool | None = None,
+        print_every: int | None = None,
+    ) -> None:
+        self.total_steps = max(0, int(total_steps))
+        self.start_step = min(max(0, int(start_step)), self.total_steps)
+        self.interactive = sys.stdout.isatty() if interactive is None else interactive
+        self.print_every = max(1, self.total_steps // 20) if print_every is None else max(1, int(print_every))
+        self._progress: Progress | None = None
+        self._task_id: Any = None
+        self._t0: float | None = None
+
+    def __enter__(self) -> TrainingProgress:
+        self.start()
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    def start(self) -> None:
+        """Start the clock (and the bar); ``update`` calls it if the object is used without ``with``."""
+        if self._t0 is not None:
+            return
+        self._t0 = time.perf_counter()
+        if self.interactive:
+            self._progress = Progress(
+                TextColumn("[bold]iter"),
+                MofNCompleteColumn(),
+                BarColumn(),
+                TextColumn("{task.fields[metrics]}"),
+                _RateColumn(),
+                TextColumn("eta"),
+                TimeRemainingColumn(),
+                console=get_console(),
+            )
+            self._progress.start()
+            self._task_id = self._progress.add_task(
+                "train", total=max(self.total_steps, 1), completed=self.start_step, metrics=""
+            )
+
+    def close(self) -> None:
+        if self._progress is not None:
+            self._progress.stop()
+            self._progress = None
+
+    def update(self, step: int, **metrics: float) -> None:
+        """Report that ``step`` iterations are done, with the latest metrics (e.g. ``loss``, ``psnr``, ``f``)."""
+        self.start()
+        step = min(max(0, int(step)), self.total_steps)
+        if self._progress is not None:
+            self._progress.update(self._task_id, completed=step, metrics=format_metrics(metrics))
+            return
+        if step % self.print_every == 0 or step >= self.total_steps:
+            print(self.status_line(step, metrics), file=sys.stdout, flush=True)
+
+    def status_line(self, step: int, metrics: dict[str, Any]) -> str:
+        """``step 400/800 (50%) loss 0.0123 psnr 21.45 f 0.650 | 6.1 it/s, eta 1m05s`` (no escape codes)."""
+        step = min(max(0, int(step)), self.total_steps)
+        percent = 100.0 if self.total_steps == 0 else 100.0 * step / self.total_steps
+        elapsed = 0.0 if self._t0 is None else time.perf_counter() - self._t0
+        done_here = step - self.start_step
+        if done_here > 0 and elapsed > 0:
+            rate = done_here / elapsed
+            timing = f"{rate:.1f} it/s, eta {format_duration((self.total_steps - step) / rate)}"
+        else:
+            timing = "-- it/s, eta ?"
+        text = f"step {step}/{self.total_steps} ({percent:.0f}%)"
+        shown = format_metrics(metrics)
+        if shown:
+            text += " " + shown
+        return f"{text} | {timing}"
+
+
+def _jsonable(value: Any) -> Any:
+    """Plain-JSON form: 0-d tensors/numpy scalars as numbers, Paths as str, NaN/inf as null (strict JSON)."""
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, Path):
+        return str(value)
+    if hasattr(value, "item") and callable(value.item) and getattr(value, "ndim", 0) == 0:
+        value = value.item()
+    elif hasattr(value, "tolist") and callable(value.tolist):
+        return _jsonable(value.tolist())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def append_jsonl(path: Path, record: dict) -> None:
+    """Append ``record`` as one JSON line; the file is reopened each call so a crash loses no earlier line."""
+    path = Path(path)
+    line = json.dumps(_jsonable(record), allow_nan=False, default=str)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("a", encoding="utf-8") as fh:
+            fh.write(line + "\n")
+            fh.flush()
+    except OSError as err:
+        raise UserError(
+            f"cannot append to the log file {path}: {err}",
+            fix="free disk space, or choose a writable --output-dir",
+        ) from err

@@ -1,0 +1,27 @@
+"""Shared fixtures: the ../shared material (skipped outside CI when absent, a failure in CI) and tiny scenes."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+SHARED_DIR = Path(os.environ.get("FOURIERF_SHARED", REPO_ROOT.parent / "shared"))
+
+
+def require_shared(*parts: str) -> Path:
+    """Path under ../shared; skips with the reason when it is absent, but fails in CI where it must be present."""
+    path = SHARED_DIR.joinpath(*parts)
+    if not path.exists():
+        reason = f"{path} is absent: clone the project with its shared/ material beside it to run this test"
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(f"CI=true but {reason}")
+        pytest.skip(reason)
+    return path
+
+
+@pytest.fixture
+def shared_dir() -> Path:
+    return require_shared()

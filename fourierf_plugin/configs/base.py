@@ -97,6 +97,8 @@ def _convert(value: Any, tp: Any, where: str) -> Any:
             raise TypeError(f"{where}: expected a list, got {value!r}")
         args = get_args(tp)
         if origin is tuple and args and args[-1] is not Ellipsis:
+            if len(value) != len(args):
+                raise ValueError(f"{where}: expected {len(args)} values, got {len(value)}: {value!r}")
             return tuple(_convert(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args, strict=True)))
         item = args[0] if args else Any
         seq = [_convert(v, item, f"{where}[{i}]") for i, v in enumerate(value)]
@@ -130,9 +132,15 @@ def _convert(value: Any, tp: Any, where: str) -> Any:
 def _from_dict(data: dict[str, Any], where: str, default_cls: type | None = None) -> Any:
     registry = _registry()
     name = data.get("_type")
+    # Plain nested dataclasses (not InstantiateConfig) are known by their declared type only.
+    known_plain = default_cls is not None and name == default_cls.__name__
+    if name is not None and name not in registry and not known_plain:
+        raise ValueError(f"{where}: unknown config class {name!r} (known: {sorted(registry)})")
     cls = registry.get(name, default_cls) if name is not None else default_cls
     if cls is None:
-        raise ValueError(f"{where}: unknown config class {name!r} (known: {sorted(registry)})")
+        raise ValueError(f"{where}: no config class given")
+    if default_cls is not None and not issubclass(cls, default_cls):
+        raise ValueError(f"{where}: {cls.__name__} is not a {default_cls.__name__}")
     hints = typing.get_type_hints(cls)
     kwargs: dict[str, Any] = {}
     names = {f.name for f in dataclasses.fields(cls) if not f.name.startswith("_")}

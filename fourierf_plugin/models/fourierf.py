@@ -37,6 +37,7 @@ from fourierf_plugin.model_components.rendering import (
     expected_depth,
 )
 from fourierf_plugin.utils.console import get_console
+from fourierf_plugin.utils.errors import fail
 
 
 @dataclass
@@ -55,6 +56,20 @@ class FourierConfig:
     """Weight kept on out-of-band plane coefficients; the paper zeroes them, the official code keeps 1e-6."""
     app_planes_follow_density: bool = False
     """Official-code behaviour: appearance planes use the density cutoff instead of the colour cutoff."""
+
+
+def _event_steps(fractions: tuple[float, ...], max_iters: int, flag: str) -> list[int]:
+    """Steps of scheduled events; a schedule that does not fit the run is the user's to fix."""
+    if not fractions:
+        return []
+    try:
+        return schedules.steps_from_fractions(fractions, max_iters)
+    except ValueError as err:
+        fail(
+            f"{flag} {' '.join(map(str, fractions))} does not fit a run of {max_iters} iterations ({err})",
+            f"use fractions strictly between 0 and 1 and a --max-num-iterations long enough to place them "
+            f"(at least {max(2, math.ceil(1 / min(fractions)))} here), or pass {flag} with no value to disable them",
+        )
 
 
 @dataclass
@@ -86,12 +101,12 @@ class FourieRFModel(nn.Module):
         self.background: Background = config.background or declaration.background
         self.view_dependent = declaration.view_dependent if config.view_dependent is None else config.view_dependent
         fc = config.field
-        self.upsample_steps = (
-            schedules.steps_from_fractions(fc.upsample_fractions, max_iters) if fc.upsample_fractions else []
+        self.upsample_steps = _event_steps(
+            fc.upsample_fractions, max_iters, "--pipeline.model.field.upsample-fractions"
         )
         self.voxel_targets = schedules.voxel_counts(fc.n_voxels_init, fc.n_voxels_final, len(self.upsample_steps))
         frac = config.occupancy_update_fractions
-        self.occupancy_steps = schedules.steps_from_fractions(frac, max_iters) if frac else []
+        self.occupancy_steps = _event_steps(frac, max_iters, "--pipeline.model.occupancy-update-fractions")
         reso = schedules.n_to_reso(fc.n_voxels_init, (scene_box[1] - scene_box[0]).tolist())
         self.field = FourierTensoRFField(fc, scene_box, reso, self.view_dependent, generator)
         self.occupancy = OccupancyGrid()

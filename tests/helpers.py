@@ -1,0 +1,88 @@
+"""Tiny training settings shared by the CLI, smoke and resume tests: the bundled scene on a 16³ -> 24³ grid.
+
+Why one place: every end-to-end test must stay a few seconds on two shared CPU cores, and a change of the demo
+scene or of a flag name should be fixed once, not in five files.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import torch
+
+from fourierf_plugin.engine.trainer import Trainer, TrainerConfig
+from fourierf_plugin.scripts.train import parse_args
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+TINY_SCENE = REPO_ROOT / "demo" / "lego_tiny"
+TINY_TRAIN_IDS = [0, 1, 2, 3]  # indices into the demo's transforms_train.json frames
+TINY_TRAIN_NAMES = ["r_27", "r_76", "r_97", "r_99"]
+TINY_TEST_VIEWS = 8
+TINY_IMAGE_SIZE = (100, 100)
+TINY_INIT_RESO = [16, 16, 16]  # n_voxels_init 4096 in the cubic Blender box
+TINY_FINAL_RESO = [24, 24, 24]  # n_voxels_final 13824
+
+TINY_FLAGS: list[str] = [
+    "--pipeline.datamanager.rays-per-batch",
+    "256",
+    "--pipeline.model.field.n-voxels-init",
+    "4096",
+    "--pipeline.model.field.n-voxels-final",
+    "13824",
+]
+"""Overrides that make a run take seconds: 256 rays a batch, a 16³ grid upsampled to 24³."""
+
+
+def tiny_args(
+    output_dir: Path, method: str = "fourierf-vm", iters: int = 30, extra: list[str] | None = None
+) -> list[str]:
+    """``fourierf-train`` arguments for a tiny run on the bundled scene writing under ``output_dir``."""
+    return [
+        method,
+        "--data",
+        str(TINY_SCENE),
+        "--output-dir",
+        str(output_dir),
+        "--max-num-iterations",
+        str(iters),
+        *TINY_FLAGS,
+        *(extra or []),
+    ]
+
+
+def tiny_trainer_config(
+    output_dir: Path, method: str = "fourierf-vm", iters: int = 30, extra: list[str] | None = None
+) -> TrainerConfig:
+    """The parsed config of a tiny run (built through the real CLI parser)."""
+    return parse_args(tiny_args(output_dir, method, iters, extra))
+
+
+def train_tiny(
+    output_dir: Path, method: str = "fourierf-vm", iters: int = 30, extra: list[str] | None = None
+) -> tuple[Trainer, Path]:
+    """Train a tiny run in-process; returns the trainer (for its final model) and the run directory."""
+    trainer = Trainer(tiny_trainer_config(output_dir, method, iters, extra))
+    run_dir = trainer.train()
+    return trainer, run_dir
+
+
+def venv_script(name: str) -> Path:
+    """An installed console script of the interpreter running the tests (``.venv/bin/fourierf-train``)."""
+    return Path(sys.executable).parent / name
+
+
+@pytest.fixture(scope="module", autouse=True)
+def single_torch_thread() -> Iterator[None]:
+    """One torch thread while a module's tiny runs train, restored afterwards.
+
+    Why: on a small shared machine (two cores, a benchmark or a second pytest worker beside us) OpenMP threads
+    oversubscribe and a 5 s tiny run takes 20 s; tiny grids gain nothing from a second thread anyway.
+    Import it into a test module (``from tests.helpers import single_torch_thread``) to apply it there.
+    """
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)

@@ -11,11 +11,19 @@ from importlib.metadata import entry_points
 import tyro
 
 from fourierf_plugin.engine.trainer import TrainerConfig
-from fourierf_plugin.method_configs.presets import descriptions, fourierf_cp, fourierf_vm, tensorf_cp, tensorf_vm
+from fourierf_plugin.method_configs.presets import (
+    descriptions,
+    fourierf_cp,
+    fourierf_vm,
+    fourierf_vm_code,
+    tensorf_cp,
+    tensorf_vm,
+)
 
 all_methods: dict[str, TrainerConfig] = {
     "fourierf-vm": fourierf_vm,
     "fourierf-cp": fourierf_cp,
+    "fourierf-vm-code": fourierf_vm_code,
     "tensorf-vm": tensorf_vm,
     "tensorf-cp": tensorf_cp,
 }

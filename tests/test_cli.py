@@ -16,7 +16,7 @@ from fourierf_plugin.scripts.train import parse_args
 from fourierf_plugin.utils.errors import EXIT_USER_ERROR, run_cli
 from tests.helpers import REPO_ROOT, TINY_SCENE, tiny_args, venv_script
 
-PRESETS = ["fourierf-vm", "fourierf-cp", "tensorf-vm", "tensorf-cp"]
+PRESETS = ["fourierf-vm", "fourierf-cp", "fourierf-vm-code", "tensorf-vm", "tensorf-cp"]
 
 
 def _exit_code(entry, args: list[str]) -> int:

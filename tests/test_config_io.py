@@ -13,7 +13,7 @@ from fourierf_plugin.method_configs import all_methods
 from fourierf_plugin.scripts.train import parse_args
 from fourierf_plugin.utils.errors import UserError
 
-PRESETS = ["fourierf-vm", "fourierf-cp", "tensorf-vm", "tensorf-cp"]
+PRESETS = ["fourierf-vm", "fourierf-cp", "fourierf-vm-code", "tensorf-vm", "tensorf-cp"]
 
 
 def _overridden() -> TrainerConfig:

@@ -150,10 +150,10 @@ def test_density_cp_feature_is_sum_of_products() -> None:
 
 def test_density_relu_activation() -> None:
     field = _field("vm", density_activation="relu")
-    _fill(field, 1.0, 2.0)  # feature = 9 * 2 = 18 -> relu(8) = 8
+    _fill(field, 1.0, 2.0)  # feature = 9 * 2 = 18 -> relu(18) = 18: ReLU takes no shift (TensoRF)
     field.prepare(1.0, 1.0)
-    torch.testing.assert_close(field.density(_points(10)), torch.full((10,), 8.0))
-    _fill(field, 1.0, 0.5)  # feature 4.5 -> relu(-5.5) = 0 (the "dead" LLFF case, spec 7.2)
+    torch.testing.assert_close(field.density(_points(10)), torch.full((10,), 18.0))
+    _fill(field, 1.0, -0.5)  # feature -4.5 -> relu(-4.5) = 0 (the "dead" LLFF case, spec 7.2)
     field.prepare(1.0, 1.0)
     assert (field.density(_points(10)) == 0).all()
 

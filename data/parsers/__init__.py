@@ -12,10 +12,14 @@ import tyro
 
 from fourierf_plugin.data.dataparser_base import DataParserConfig
 from fourierf_plugin.data.parsers.blender import BlenderDataParserConfig
+from fourierf_plugin.data.parsers.llff import LLFFDataParserConfig
 
 
 def _discover() -> dict[str, DataParserConfig]:
-    found: dict[str, DataParserConfig] = {"blender-data": BlenderDataParserConfig()}
+    found: dict[str, DataParserConfig] = {
+        "blender-data": BlenderDataParserConfig(),
+        "llff-data": LLFFDataParserConfig(),
+    }
     for ep in entry_points(group="fourierf.dataparser_configs"):
         cfg = ep.load()
         if isinstance(cfg, DataParserConfig):

@@ -9,8 +9,10 @@ from typing import ClassVar
 import torch
 from torch import Tensor
 
+from fourierf_plugin.cameras.cameras import Cameras
+from fourierf_plugin.cameras.ndc import ndc_rays
 from fourierf_plugin.configs.base import InstantiateConfig
-from fourierf_plugin.data.dataparser_base import DataparserOutputs, Split
+from fourierf_plugin.data.dataparser_base import DataparserOutputs, RaySpace, Split
 from fourierf_plugin.data.parsers import DataParserUnion, default_dataparser
 from fourierf_plugin.utils.errors import fail
 
@@ -31,12 +33,20 @@ class EvalView:
     width: int
 
 
-def all_rays(outputs: DataparserOutputs, device: torch.device) -> RayBatch:
+def camera_rays(cameras: Cameras, index: int, ray_space: RaySpace) -> tuple[Tensor, Tensor]:
+    """Rays of one camera: unit directions in a euclidean scene, NDC origins/directions (not unit) otherwise."""
+    if ray_space == "ndc":
+        o, d = cameras.generate_rays(index, normalize=False)
+        return ndc_rays(o, d, float(cameras.fx[index]), cameras.width, cameras.height, near=1.0)
+    return cameras.generate_rays(index)
+
+
+def all_rays(outputs: DataparserOutputs, device: torch.device, ray_space: RaySpace = "euclidean") -> RayBatch:
     """Rays and targets of every pixel of every image of a split, image by image, row-major."""
-    origins, directions = zip(*(outputs.cameras.generate_rays(i) for i in range(len(outputs.cameras))), strict=True)
+    rays = [camera_rays(outputs.cameras, i, ray_space) for i in range(len(outputs.cameras))]
     return RayBatch(
-        torch.cat(origins).to(device),
-        torch.cat(directions).to(device),
+        torch.cat([r[0] for r in rays]).to(device),
+        torch.cat([r[1] for r in rays]).to(device),
         outputs.images.reshape(-1, 4).to(device),
     )
 
@@ -53,15 +63,28 @@ class DataManager:
         self.device = device
         self.generator = generator
         self.parser = config.dataparser.setup()
+        self.ray_space: RaySpace = self.parser.declaration().ray_space
         self.train_outputs: DataparserOutputs | None = None
-        self.train_rays: RayBatch | None = None
+        self._train_rays: RayBatch | None = None
         self.active = torch.zeros(0, dtype=torch.long)
         self._order = torch.zeros(0, dtype=torch.long)
         self._cursor = 0
+        self.load_train = load_train
         if load_train:
             self.train_outputs = self.parser.get_outputs("train")
-            self.train_rays = all_rays(self.train_outputs, device)
-            self.active = torch.arange(self.train_rays.origins.shape[0])
+            self.active = torch.arange(self.train_outputs.images[..., 0].numel())
+
+    def set_ray_space(self, ray_space: RaySpace) -> None:
+        """Rays are made lazily, so the pipeline can apply an override of the scene's declared ray space first."""
+        if ray_space != self.ray_space:
+            self.ray_space = ray_space
+            self._train_rays = None
+
+    @property
+    def train_rays(self) -> RayBatch | None:
+        if self._train_rays is None and self.load_train:
+            self._train_rays = all_rays(self.reference_outputs, self.device, self.ray_space)
+        return self._train_rays
 
     @property
     def reference_outputs(self) -> DataparserOutputs:
@@ -98,7 +121,7 @@ class DataManager:
     def eval_views(self, split: Split) -> Iterator[EvalView]:
         outputs = self.parser.get_outputs(split)
         for i in range(len(outputs.cameras)):
-            o, d = outputs.cameras.generate_rays(i)
+            o, d = camera_rays(outputs.cameras, i, self.ray_space)
             rgba = outputs.images[i].reshape(-1, 4)
             yield EvalView(
                 outputs.image_names[i],

@@ -12,7 +12,8 @@ from fourierf_plugin.cameras.cameras import Cameras
 from fourierf_plugin.configs.base import InstantiateConfig
 
 Split = Literal["train", "val", "test"]
-Background = Literal["white", "black", "random"]
+# "none": photos with no background; every ray must be absorbed (trained on black or white at random, shown on black).
+Background = Literal["white", "black", "random", "none"]
 RaySpace = Literal["euclidean", "ndc"]
 
 
@@ -29,6 +30,16 @@ class SceneDeclaration:
     bounded: bool = True
     view_dependent: bool = False
     occlusion_regularization: bool = False
+
+    def describe(self) -> str:
+        def yes(flag: bool) -> str:
+            return "yes" if flag else "no"
+
+        extent = "bounded" if self.bounded else "forward-facing"
+        return (
+            f"background={self.background}, rays={self.ray_space}, {extent}, "
+            f"view-dependent={yes(self.view_dependent)}, occlusion-regularisation={yes(self.occlusion_regularization)}"
+        )
 
 
 @dataclass
@@ -49,6 +60,7 @@ class DataparserOutputs:
     declaration: SceneDeclaration
     scene_name: str
     source_files: list[Path] = field(default_factory=list)
+    depth_bounds: tuple[float, float] | None = None  # metric (near, far) of the content, e.g. for spiral paths in NDC
 
 
 @dataclass
@@ -68,3 +80,7 @@ class DataParser:
 
     def get_outputs(self, split: Split) -> DataparserOutputs:  # pragma: no cover - interface
         raise NotImplementedError
+
+    def declaration(self) -> SceneDeclaration:
+        """What the scene needs, known without loading images (so presets can be chosen before set-up)."""
+        return SceneDeclaration()

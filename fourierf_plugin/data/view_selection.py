@@ -107,3 +107,10 @@ def explicit_views(ids: Sequence[int], num_available: int, source: str) -> list[
     if dupes:
         fail(f"view ids {dupes} are given more than once for {source}", f"list each view once, using {valid}")
     return ids
+
+
+def regnerf_views(num_train: int, n: int) -> list[int]:
+    """Positions in the training list picked by the RegNeRF/FreeNeRF rule: round-half-even of linspace(0, T-1, n)."""
+    if not 1 <= n <= num_train:
+        raise ValueError(f"cannot pick {n} of {num_train} training views")
+    return [int(i) for i in np.round(np.linspace(0, num_train - 1, n))]

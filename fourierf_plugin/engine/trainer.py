@@ -18,9 +18,10 @@ from fourierf_plugin.configs.base import InstantiateConfig, load_config, save_co
 from fourierf_plugin.engine.checkpoint import load_latest_checkpoint, save_checkpoint
 from fourierf_plugin.engine.optimizers import OptimizerConfig, build_optimizer, set_learning_rates
 from fourierf_plugin.engine.run_dir import make_run_dir
+from fourierf_plugin.engine.scene_presets import apply_real_scene_preset
 from fourierf_plugin.pipelines.base import Pipeline, PipelineConfig
-from fourierf_plugin.utils.console import TrainingProgress, append_jsonl, format_duration, get_console
-from fourierf_plugin.utils.errors import fail
+from fourierf_plugin.utils.console import TrainingProgress, append_jsonl, format_duration, get_console, warn
+from fourierf_plugin.utils.errors import UserError, fail
 
 
 def pick_device(choice: str) -> torch.device:
@@ -75,9 +76,17 @@ class Trainer:
         c = config
         if c.max_num_iterations < 1:
             fail(f"--max-num-iterations must be at least 1, got {c.max_num_iterations}", "pass a positive number")
+        outside = [s for s in c.export_mesh_at if not 1 <= s <= c.max_num_iterations]
+        if outside:
+            fail(
+                f"--export-mesh-at {outside} lies outside the run's 1..{c.max_num_iterations} iterations",
+                "pass iteration numbers within the run",
+            )
         if c.load_dir is not None:
             self._prepare_resume(c.load_dir)
             c = self.config
+        else:
+            self._choose_scene_preset()
         if c.threads is not None:
             torch.set_num_threads(c.threads)
         self.device = pick_device(c.device)
@@ -98,6 +107,24 @@ class Trainer:
         self._announce()
 
     # -- set-up ---------------------------------------------------------------------------------------------------
+    def _choose_scene_preset(self) -> None:
+        """Synthetic or real-scene settings, from what the scene declares (forward-facing → real), unless forced."""
+        c = self.config
+        declared = c.pipeline.datamanager.dataparser.setup().declaration()
+        preset = c.scene_preset
+        if preset == "auto":
+            preset = "synthetic" if declared.bounded else "real"
+        c.scene_preset = preset
+        if preset != "real":
+            return
+        from fourierf_plugin.method_configs import all_methods
+
+        applied, kept = apply_real_scene_preset(c, all_methods.get(c.method_name))
+        reason = "the scene is forward-facing" if declared.bounded is False else "--scene-preset real"
+        self.console.print(f"real-scene preset ({reason}): {', '.join(applied)}")
+        if kept:
+            self.console.print(f"  kept your settings for: {', '.join(kept)}")
+
     def _prepare_resume(self, load_dir: Path) -> None:
         saved = load_config(load_dir, TrainerConfig)
         if saved.method_name != self.config.method_name:
@@ -124,11 +151,7 @@ class Trainer:
             f"[bold]{self.config.method_name}[/bold] on {scene.scene_name}: run directory {self.run_dir}"
         )
         self.console.print(f"training views ({len(scene.view_ids)}): {', '.join(scene.image_names)}")
-        self.console.print(
-            f"scene effects: background={model.background}, rays={d.ray_space}, "
-            f"{'bounded' if d.bounded else 'unbounded'}, view-dependent={'yes' if model.view_dependent else 'no'}, "
-            f"occlusion-regularisation={'yes' if d.occlusion_regularization else 'no'}"
-        )
+        self.console.print(f"scene effects: {model.effects.describe()} (declared: {d.describe()})")
         self.console.print(
             f"device {self.device}, grid {model.field.resolution}, {self.config.max_num_iterations} iterations, "
             f"occupancy updates after {model.occupancy_steps}, upsamples after {model.upsample_steps}"
@@ -157,6 +180,18 @@ class Trainer:
         self.generator.set_state(state["generator"])
         torch.set_rng_state(state["torch_rng"])
         return optimizer
+
+    def _export_mesh(self, step: int) -> None:
+        """The coarse-to-fine trajectory as meshes; a mesh that cannot be made is a warning, never a lost run."""
+        from fourierf_plugin.exporter.marching_cubes import describe, export_field_mesh
+
+        path = self.run_dir / "meshes" / f"step-{step:06d}.ply"
+        try:
+            report = export_field_mesh(self.pipeline.model, step, path, resolution=self.config.export_mesh_resolution)
+        except UserError as err:
+            warn(f"no mesh at step {step}: {err.problem}")
+            return
+        self.console.print(f"mesh at step {step}: " + "; ".join(describe(report)))
 
     # -- loop -------------------------------------------------------------------------------------------------------
     def train(self) -> Path:
@@ -190,6 +225,8 @@ class Trainer:
                     append_jsonl(metrics_path, record)
                 if done % c.steps_per_save == 0 or done == c.max_num_iterations:
                     self.save(done, optimizer)
+                if done in c.export_mesh_at:
+                    self._export_mesh(done)
                 if interrupt.requested:
                     break
         elapsed = time.perf_counter() - started
@@ -237,3 +274,9 @@ class TrainerConfig(InstantiateConfig):
     """Resume the run in this directory from its latest checkpoint (its config.json is used)."""
     timestamp: str | None = None
     """Run directory name (default: the current time)."""
+    export_mesh_at: tuple[int, ...] = ()
+    """Export a marching-cubes mesh of the geometry after these iterations (RUN/meshes/step-N.ply)."""
+    export_mesh_resolution: int = 128
+    """Grid resolution of the meshes exported during training."""
+    scene_preset: Literal["auto", "synthetic", "real"] = "auto"
+    """Synthetic or real-scene settings; auto picks real for forward-facing scenes (flags you set always win)."""

@@ -44,7 +44,7 @@ class FieldConfig:
     init_scale: float | None = None
     """Std of the initial grid values; None = TensoRF's 0.1 (VM) / 0.2 (CP)."""
     density_shift: float = -10.0
-    """Added to the density feature before the activation (softplus(x - 10) ≈ 4.5e-5 at 0)."""
+    """Added to the density feature before softplus (softplus(x - 10) ≈ 4.5e-5 at 0); ReLU takes no shift."""
     density_activation: Literal["softplus", "relu"] = "softplus"
     """Density activation; TensoRF uses softplus for synthetic and ReLU for LLFF scenes."""
     n_voxels_init: int = 128**3
@@ -113,8 +113,10 @@ class FourierTensoRFField(nn.Module):
         g = self.filtered
         x = self.normalize(xyz)
         feats = self.density_grid.features(g.density_planes, g.density_lines, x)
-        raw = torch.stack([f.sum(dim=-1) for f in feats]).sum(dim=0) + self.config.density_shift
-        return F.softplus(raw) if self.config.density_activation == "softplus" else F.relu(raw)
+        raw = torch.stack([f.sum(dim=-1) for f in feats]).sum(dim=0)
+        if self.config.density_activation == "softplus":
+            return F.softplus(raw + self.config.density_shift)
+        return F.relu(raw)  # TensoRF applies the shift to softplus only; relu(x - 10) would start dead
 
     def rgb(self, xyz: Tensor, directions: Tensor | None) -> Tensor:
         """Colour in [0, 1] at world points [N, 3] (directions unit [N, 3], used only when view-dependent)."""

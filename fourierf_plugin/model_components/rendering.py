@@ -46,7 +46,11 @@ def composite_target(rgba: Tensor, background: Tensor) -> Tensor:
 
 
 def background_color(kind: str, num_rays: int, device: torch.device, generator: torch.Generator | None) -> Tensor:
-    """The background a scene declared: white, black, or a random colour per ray (training only)."""
+    """The training background a scene declared: white, black, a random colour per ray, or — for "none", photos
+    that have no background — black or white with even odds per batch, so only full absorption (acc = 1) fits both
+    (TensoRF's LLFF trick; on black alone an empty start gets no gradient at all)."""
+    if kind == "none":
+        kind = "white" if float(torch.rand(1, generator=generator)) < 0.5 else "black"
     if kind == "white":
         return torch.ones(3, device=device)
     if kind == "black":

@@ -20,6 +20,7 @@ from fourierf_plugin.data.dataparser_base import Background, SceneDeclaration
 from fourierf_plugin.field_components import schedules
 from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig, FourierTensoRFField
 from fourierf_plugin.model_components import losses
+from fourierf_plugin.model_components.gradient_scaling import floaters_scale, scale_gradient
 from fourierf_plugin.model_components.occupancy import (
     OccupancyGrid,
     occupancy_from_alpha,
@@ -56,6 +57,27 @@ class FourierConfig:
     """Weight kept on out-of-band plane coefficients; the paper zeroes them, the official code keeps 1e-6."""
     app_planes_follow_density: bool = False
     """Official-code behaviour: appearance planes use the density cutoff instead of the colour cutoff."""
+
+
+def resolve_effects(declared: SceneDeclaration, config: FourieRFModelConfig) -> SceneDeclaration:
+    """The scene's declaration with the model config's explicit overrides (None = as declared) applied."""
+    overrides = {
+        "background": config.background,
+        "ray_space": config.ray_space,
+        "view_dependent": config.view_dependent,
+        "occlusion_regularization": config.occlusion_regularization,
+    }
+    return dataclasses.replace(declared, **{k: v for k, v in overrides.items() if v is not None})
+
+
+def occlusion_penalty(sigma: Tensor, fraction: float) -> Tensor:
+    """FreeNeRF's occlusion term: mean over rays and all K samples of σ_k · 1[k < M], M = round(fraction · K).
+
+    It penalises density right in front of the cameras, where few-shot training likes to paint floaters.
+    """
+    k = sigma.shape[-1]
+    m = max(1, round(fraction * k))
+    return sigma[:, :m].sum(dim=-1).mean() / k
 
 
 def _event_steps(fractions: tuple[float, ...], max_iters: int, flag: str) -> list[int]:
@@ -98,8 +120,10 @@ class FourieRFModel(nn.Module):
         self.near, self.far = float(near), float(far)
         self.max_iters = int(max_iters)
         self.generator = generator
-        self.background: Background = config.background or declaration.background
-        self.view_dependent = declaration.view_dependent if config.view_dependent is None else config.view_dependent
+        self.effects = resolve_effects(declaration, config)
+        self.background: Background = self.effects.background
+        self.view_dependent = self.effects.view_dependent
+        self.ray_space = self.effects.ray_space
         fc = config.field
         self.upsample_steps = _event_steps(
             fc.upsample_fractions, max_iters, "--pipeline.model.field.upsample-fractions"
@@ -153,44 +177,79 @@ class FourieRFModel(nn.Module):
         self.field.prepare(f_d, f_c, fc.plane_leakage, fc.app_planes_follow_density)
 
     def forward(self, origins: Tensor, directions: Tensor, training: bool, background: Tensor | None = None) -> dict:
-        """Render rays [R, 3] (unit directions). Returns rgb [R, 3], accumulation [R], depth [R]."""
+        """Render rays [R, 3] (unit directions; NDC directions as made). Returns rgb [R, 3], accumulation, depth [R]."""
         num_rays = origins.shape[0]
         device = origins.device
         if background is None:
             background = background_color(
                 self.background if training else self._eval_background(), num_rays, device, self.generator
             )
-        start, t_exit = ray_box_span(origins, directions, self.aabb, self.near, self.far)
-        step = self.step_size
-        span = ((t_exit - start) / step).clamp(min=0)
-        needed = math.ceil(float(span.max())) + 1 if num_rays else 0
-        num_samples = max(1, min(self.samples_per_ray(training), needed))
-        jitter = torch.rand(num_rays, generator=self.generator).to(device) if training else None
-        t = step_samples(start, step, num_samples, jitter)
-        inside = t < t_exit.unsqueeze(-1)
+        if self.ray_space == "ndc":
+            t, deltas = self._ndc_samples(origins, directions, training)
+        else:
+            t, deltas, t_exit = self._box_samples(origins, directions, training)
+        num_samples = t.shape[1]
         xyz = origins.unsqueeze(1) + directions.unsqueeze(1) * t.unsqueeze(-1)
+        if self.ray_space == "ndc":
+            inside = ((xyz >= self.aabb[0]) & (xyz <= self.aabb[1])).all(dim=-1)
+            directions = directions / directions.norm(dim=-1, keepdim=True)
+        else:
+            inside = t < t_exit.unsqueeze(-1)
         valid = inside.clone()
         if self.occupancy.active and inside.any():
             valid[inside] = self.occupancy.query(xyz[inside])
         sigma = torch.zeros_like(t)
         if valid.any():
             sigma = sigma.index_put((valid,), self.field.density(xyz[valid]))
-        weights = composite_weights(sigma, sample_deltas(t), self.config.distance_scale)
+        grad_scale = floaters_scale(t) if self.config.floaters_gradient_scaling and training else None
+        if grad_scale is not None:
+            sigma = scale_gradient(sigma, grad_scale)
+        weights = composite_weights(sigma, deltas, self.config.distance_scale)
 
         shade = weights.detach() > self.config.weight_threshold
         colors = torch.zeros(num_rays, num_samples, 3, device=device, dtype=t.dtype)
         if shade.any():
             dirs = directions.unsqueeze(1).expand_as(xyz)[shade] if self.view_dependent else None
             colors = colors.index_put((shade,), self.field.rgb(xyz[shade], dirs))
+            if grad_scale is not None:
+                colors = scale_gradient(colors, grad_scale.unsqueeze(-1))
         acc = weights.sum(dim=-1)
         rgb = blend_background(accumulate(weights, colors), acc, background)
         if not training:
             rgb = rgb.clamp(0.0, 1.0)
         depth = expected_depth(weights, t, torch.full_like(acc, self.far))
-        return {"rgb": rgb, "accumulation": acc, "depth": depth, "background": background}
+        out = {"rgb": rgb, "accumulation": acc, "depth": depth, "background": background}
+        if training and self.effects.occlusion_regularization:
+            out["occlusion"] = occlusion_penalty(sigma, self.config.occlusion_fraction)
+        return out
+
+    def _box_samples(self, origins: Tensor, directions: Tensor, training: bool) -> tuple[Tensor, Tensor, Tensor]:
+        """Fixed-step marching from the box entry (unit directions, metric t), per-ray jitter in training.
+
+        Returns t and δ [R, N] and where each ray leaves the box [R].
+        """
+        num_rays = origins.shape[0]
+        start, t_exit = ray_box_span(origins, directions, self.aabb, self.near, self.far)
+        step = self.step_size
+        span = ((t_exit - start) / step).clamp(min=0)
+        needed = math.ceil(float(span.max())) + 1 if num_rays else 0
+        num_samples = max(1, min(self.samples_per_ray(training), needed))
+        jitter = torch.rand(num_rays, generator=self.generator).to(origins.device) if training else None
+        t = step_samples(start, step, num_samples, jitter)
+        return t, sample_deltas(t), t_exit
+
+    def _ndc_samples(self, origins: Tensor, directions: Tensor, training: bool) -> tuple[Tensor, Tensor]:
+        """NDC rays: t evenly spaced in [near, far] (= [0, 1]) with per-sample jitter in training; δ scaled by |d|."""
+        num_rays, device = origins.shape[0], origins.device
+        n = self.samples_per_ray(training)
+        t = torch.linspace(self.near, self.far, n, device=device).expand(num_rays, n)
+        if training:
+            t = t + torch.rand(num_rays, n, generator=self.generator).to(device) * ((self.far - self.near) / n)
+        return t, sample_deltas(t) * directions.norm(dim=-1, keepdim=True)
 
     def _eval_background(self) -> Background:
-        return "white" if self.background == "random" else self.background
+        """Renders for evaluation: random → white, none (photos) → black."""
+        return {"random": "white", "none": "black"}.get(self.background, self.background)
 
     def loss_dict(self, outputs: dict, target_rgba: Tensor, step: int) -> dict[str, Tensor]:
         """Photometric MSE plus the regularisers, all on this iteration's filtered grids."""
@@ -205,6 +264,8 @@ class FourieRFModel(nn.Module):
         l1 = self.l1_weight(step)
         if l1 > 0:
             out["l1_density"] = l1 * losses.density_l1(g.density_planes, g.density_lines)
+        if "occlusion" in outputs and c.occlusion_weight > 0:
+            out["occlusion"] = c.occlusion_weight * outputs["occlusion"]
         return out
 
     @torch.no_grad()
@@ -230,7 +291,9 @@ class FourieRFModel(nn.Module):
             first = step == self.occupancy_steps[0]
             self._update_occupancy(shrink=first)
             changes.params_replaced = True
-            changes.filter_rays = len(self.occupancy_steps) > 1 and step == self.occupancy_steps[1]
+            # Ray filtering needs metric rays through a box; NDC rays all cross the frustum (TensoRF skips it too).
+            second = len(self.occupancy_steps) > 1 and step == self.occupancy_steps[1]
+            changes.filter_rays = second and self.ray_space == "euclidean"
         if step in self.upsample_steps:
             self.prepare(step + 1)
             target = self.voxel_targets[self.upsample_steps.index(step)]
@@ -339,9 +402,19 @@ class FourieRFModelConfig(InstantiateConfig):
     """Density L1 weight before the first occupancy update."""
     l1_weight_rest: float = 4e-5
     """Density L1 weight from the first occupancy update on."""
-    background: Literal["white", "black", "random"] | None = None
-    """Override the background the scene declares (None: as declared; Blender scenes declare white)."""
+    background: Literal["white", "black", "random", "none"] | None = None
+    """Override the background the scene declares (None: as declared; Blender white, LLFF none = photos)."""
     view_dependent: bool | None = None
     """Override whether colour depends on the view direction (None: as declared; off for few-shot scenes)."""
+    ray_space: Literal["euclidean", "ndc"] | None = None
+    """Override the ray space (None: as declared; LLFF scenes declare NDC)."""
+    occlusion_regularization: bool | None = None
+    """Override FreeNeRF's occlusion regulariser (None: as declared; on for forward-facing scenes)."""
+    occlusion_weight: float = 0.01
+    """Weight of the occlusion regulariser (FreeNeRF: 0.01)."""
+    occlusion_fraction: float = 20 / 128
+    """Share of each ray, from its start, whose densities the occlusion term penalises (FreeNeRF: 20 of 128)."""
+    floaters_gradient_scaling: bool = False
+    """'Floaters No More': scale density and colour gradients by clamp(t², 0, 1) (t: the ray parameter)."""
     eval_chunk_rays: int = 4096
     """Rays per chunk when rendering whole images."""

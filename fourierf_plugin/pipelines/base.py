@@ -53,9 +53,13 @@ class Pipeline:
             max_iters=max_iters,
             generator=generator,
         ).to(device)
+        self.datamanager.set_ray_space(self.model.ray_space)
         # Record the effective scene effects in the config, so config.json says what actually ran.
-        config.model.background = self.model.background
-        config.model.view_dependent = self.model.view_dependent
+        effects = self.model.effects
+        config.model.background = effects.background
+        config.model.view_dependent = effects.view_dependent
+        config.model.ray_space = effects.ray_space
+        config.model.occlusion_regularization = effects.occlusion_regularization
 
     def train_step(self, step: int) -> tuple[Tensor, dict[str, float]]:
         """Loss for one batch at ``step``; the grids are filtered once here and reused by every term."""
@@ -110,7 +114,7 @@ class Pipeline:
 
     def load_state_dict(self, state: dict) -> None:
         self.model.load_state_dict(state["model"])
-        if "datamanager" in state and self.datamanager.train_rays is not None:
+        if "datamanager" in state and self.datamanager.load_train:
             self.datamanager.load_state_dict(state["datamanager"])
 
 

@@ -14,11 +14,8 @@ import numpy as np
 import torch
 import tyro
 
-from fourierf_plugin.configs.base import load_config
-from fourierf_plugin.engine.checkpoint import load_checkpoint, load_latest_checkpoint
+from fourierf_plugin.engine.loading import load_run
 from fourierf_plugin.engine.run_dir import sanitize_name
-from fourierf_plugin.engine.trainer import TrainerConfig, pick_device, seed_everything
-from fourierf_plugin.pipelines.base import Pipeline
 from fourierf_plugin.utils.console import get_console, warn
 from fourierf_plugin.utils.errors import fail, run_cli, strip_verbose
 from fourierf_plugin.utils.lpips import LPIPS, default_lpips_weights
@@ -50,21 +47,15 @@ def to_png(image: torch.Tensor) -> np.ndarray:
 
 def evaluate(cfg: EvalConfig) -> dict:
     console = get_console()
-    train_cfg = load_config(cfg.load_config, TrainerConfig)
-    run_dir = cfg.load_config.parent if cfg.load_config.suffix == ".json" else cfg.load_config
-    if cfg.data is not None:
-        train_cfg.pipeline.datamanager.dataparser.data = cfg.data
-    if cfg.checkpoint is not None:
-        ckpt_path, state = cfg.checkpoint, load_checkpoint(cfg.checkpoint)
-    else:
-        ckpt_path, state = load_latest_checkpoint(run_dir / "checkpoints")
-    device = pick_device(cfg.device)
-    generator = seed_everything(train_cfg.seed)
-    pipeline: Pipeline = train_cfg.pipeline.setup(
-        device=device, max_iters=train_cfg.max_num_iterations, generator=generator, load_train=False
+    run = load_run(cfg.load_config, cfg.checkpoint, cfg.device, cfg.data)
+    train_cfg, pipeline, step, ckpt_path, run_dir, device = (
+        run.config,
+        run.pipeline,
+        run.step,
+        run.checkpoint,
+        run.run_dir,
+        run.device,
     )
-    pipeline.load_state_dict(state["pipeline"])
-    step = int(state["step"])
 
     weights = cfg.lpips_weights or default_lpips_weights()
     lpips = LPIPS(weights).to(device) if weights is not None else None

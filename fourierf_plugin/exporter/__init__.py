@@ -1,0 +1,1 @@
+"""Exporters: geometry out of a trained field."""

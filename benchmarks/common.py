@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import shutil
 import subprocess
 import sys
 import time
@@ -55,6 +56,11 @@ def train_and_eval(
 ) -> dict:
     """Train one run, evaluate it on the test split, and return its result row."""
     out_dir = work / "runs"
+    run_dir = out_dir / scene / run.method / run.key
+    # The harness owns its work folder: a run interrupted earlier left this directory without a result, and a new
+    # run would otherwise go to "<key>-1" (runs never overwrite each other).
+    shutil.rmtree(run_dir, ignore_errors=True)
+    shutil.rmtree(run_dir.with_name(run.key + "-1"), ignore_errors=True)
     train_cmd = [
         str(BIN / "fourierf-train"), run.method, "--data", str(data), "--output-dir", str(out_dir),
         "--timestamp", run.key, "--seed", str(run.seed), "--max-num-iterations", str(run.iters),
@@ -63,7 +69,6 @@ def train_and_eval(
     train_s, train_rss, code = run_timed(train_cmd, work / f"{run.key}.train.log")
     if code != 0:
         raise RuntimeError(f"training failed ({code}); see {work / f'{run.key}.train.log'}")
-    run_dir = out_dir / scene / run.method / run.key
     eval_json = work / f"{run.key}.eval.json"
     eval_cmd = [
         str(BIN / "fourierf-eval"), "--load-config", str(run_dir / "config.json"), "--output-path", str(eval_json),

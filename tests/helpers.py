@@ -13,7 +13,9 @@ from pathlib import Path
 import pytest
 import torch
 
+from fourierf_plugin.data.parsers.llff import LLFF_DECLARATION, NDC_BOX
 from fourierf_plugin.engine.trainer import Trainer, TrainerConfig
+from fourierf_plugin.models.fourierf import FourieRFModel, FourieRFModelConfig
 from fourierf_plugin.scripts.train import parse_args
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -86,3 +88,15 @@ def single_torch_thread() -> Iterator[None]:
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(before)
+
+
+def ndc_model(config: FourieRFModelConfig, max_iters: int = 100) -> FourieRFModel:
+    """A model on the LLFF NDC box with the LLFF declaration (seeded), for NDC sampler and effects tests."""
+    return config.setup(
+        scene_box=torch.tensor(NDC_BOX),
+        near=0.0,
+        far=1.0,
+        declaration=LLFF_DECLARATION,
+        max_iters=max_iters,
+        generator=torch.Generator().manual_seed(0),
+    )

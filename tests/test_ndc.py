@@ -11,10 +11,11 @@ import torch
 from fourierf_plugin.cameras.cameras import Cameras
 from fourierf_plugin.cameras.ndc import ndc_rays
 from fourierf_plugin.data.datamanager import camera_rays
-from fourierf_plugin.data.parsers.llff import LLFF_DECLARATION, NDC_BOX, LLFFDataParserConfig
+from fourierf_plugin.data.parsers.llff import NDC_BOX, LLFFDataParserConfig
 from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig
 from fourierf_plugin.models.fourierf import FourieRFModelConfig
 from tests.conftest import require_shared
+from tests.helpers import ndc_model as build_ndc_model
 
 FOCAL, WIDTH, HEIGHT = 40.0, 64, 48
 
@@ -159,15 +160,7 @@ def test_fern_rays_stay_inside_the_ndc_box() -> None:
 
 @pytest.fixture
 def ndc_model():
-    cfg = FourieRFModelConfig(field=FieldConfig(n_voxels_init=4096, n_voxels_final=13824))
-    return cfg.setup(
-        scene_box=torch.tensor(NDC_BOX),
-        near=0.0,
-        far=1.0,
-        declaration=LLFF_DECLARATION,
-        max_iters=100,
-        generator=torch.Generator().manual_seed(0),
-    )
+    return build_ndc_model(FourieRFModelConfig(field=FieldConfig(n_voxels_init=4096, n_voxels_final=13824)))
 
 
 def test_ndc_training_samples_cover_zero_to_one_plus_a_bin(ndc_model) -> None:

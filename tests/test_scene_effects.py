@@ -29,7 +29,7 @@ from fourierf_plugin.method_configs import all_methods
 from fourierf_plugin.model_components.gradient_scaling import floaters_scale, scale_gradient
 from fourierf_plugin.models.fourierf import FourieRFModelConfig, occlusion_penalty, resolve_effects
 from fourierf_plugin.scripts.train import parse_args
-from tests.helpers import TINY_FLAGS, TINY_SCENE, single_torch_thread  # noqa: F401 - autouse fixture
+from tests.helpers import TINY_FLAGS, TINY_SCENE, ndc_model, single_torch_thread  # noqa: F401 - autouse fixture
 from tests.test_llff_parser import write_llff_scene
 
 ITERS = 50
@@ -258,14 +258,7 @@ def _ndc_model(floaters: bool):
         field=FieldConfig(n_voxels_init=4096, n_voxels_final=13824, density_shift=0.0),
         floaters_gradient_scaling=floaters,
     )
-    return cfg.setup(
-        scene_box=torch.tensor(NDC_BOX),
-        near=0.0,
-        far=1.0,
-        declaration=LLFF_DECLARATION,
-        max_iters=100,
-        generator=torch.Generator().manual_seed(0),
-    )
+    return ndc_model(cfg)
 
 
 def _grads(floaters: bool) -> tuple[dict[str, torch.Tensor], torch.Tensor]:

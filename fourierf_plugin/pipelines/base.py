@@ -13,9 +13,9 @@ from torch import Tensor
 from fourierf_plugin.configs.base import InstantiateConfig
 from fourierf_plugin.data.datamanager import DataManager, DataManagerConfig, EvalView
 from fourierf_plugin.data.dataparser_base import Split
+from fourierf_plugin.model_components.rendering import background_color
 from fourierf_plugin.models.fourierf import Changes, FourieRFModel, FourieRFModelConfig
 from fourierf_plugin.utils.console import get_console
-from fourierf_plugin.utils.metrics import psnr
 
 
 @dataclass
@@ -83,8 +83,7 @@ class Pipeline:
 
     def render_views(self, split: Split, step: int) -> Iterator[RenderedView]:
         self.model.eval()
-        bg = self.model._eval_background()
-        background = torch.ones(3, device=self.device) if bg == "white" else torch.zeros(3, device=self.device)
+        background = background_color(self.model._eval_background(), 1, self.device, None)
         for view in self.datamanager.eval_views(split):
             start = time.perf_counter()
             out = self.model.render_rays(view.rays.origins, view.rays.directions, step)
@@ -100,14 +99,6 @@ class Pipeline:
                 seconds,
             )
         self.model.train()
-
-    def quick_psnr(self, split: Split, step: int, max_views: int = 2) -> float:
-        values = []
-        for i, r in enumerate(self.render_views(split, step)):
-            values.append(psnr(r.rgb, r.target))
-            if i + 1 >= max_views:
-                break
-        return sum(values) / max(1, len(values))
 
     def state_dict(self) -> dict:
         return {"model": self.model.state_dict(), "datamanager": self.datamanager.state_dict()}

@@ -79,6 +79,31 @@ def _remove_quietly(path: Path) -> None:
         warn(f"could not remove the temporary file {path}: {err}")
 
 
+_TEMP_RE = re.compile(r"^\.step-\d+\.ckpt\.tmp-(\d+)$")
+
+
+def _process_alive(pid: int) -> bool:
+    """Whether ``pid`` runs (POSIX); elsewhere assume it does, so nothing of a live writer is ever removed."""
+    if os.name == "nt":
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # e.g. EPERM: it exists but belongs to someone else
+        return True
+    return True
+
+
+def _sweep_stale_temps(directory: Path) -> None:
+    """Remove temp files left by a writer that was killed mid-save (SIGKILL, power loss): each is a partial
+    checkpoint that would otherwise stay on disk for good. Files of live processes are left alone."""
+    for path in directory.iterdir():
+        match = _TEMP_RE.match(path.name)
+        if match and int(match.group(1)) != os.getpid() and not _process_alive(int(match.group(1))):
+            _remove_quietly(path)
+
+
 def _prune(directory: Path, keep_last: int, just_written: Path) -> None:
     """Keep ``just_written`` plus the newest ``keep_last - 1`` others; failures only warn (the save succeeded)."""
     if keep_last <= 0:
@@ -120,6 +145,7 @@ def save_checkpoint(state: dict, directory: Path, step: int, keep_last: int = 3)
             fix="free disk space, or choose a writable --output-dir",
         ) from err
     _prune(directory, keep_last, final)
+    _sweep_stale_temps(directory)
     return final
 
 

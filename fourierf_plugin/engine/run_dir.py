@@ -27,6 +27,21 @@ def sanitize_name(name: str) -> str:
     return safe
 
 
+def unique_safe_name(name: str, index: int, taken: set[str]) -> str:
+    """``sanitize_name(name)``, with ``_<index>`` (then ``_<index+1>``, ...) appended while it is already taken.
+
+    Why: dataset names like ``a:b`` and ``a?b`` both become ``a_b``; without this the second render would silently
+    overwrite the first. The result is added to ``taken``.
+    """
+    safe = sanitize_name(name)
+    candidate, n = safe, index
+    while candidate in taken:
+        candidate = f"{safe[: MAX_NAME_LEN - 12]}_{n:05d}"
+        n += 1
+    taken.add(candidate)
+    return candidate
+
+
 def timestamp_now() -> str:
     """Local time as ``2024-05-01_134502`` (sorts chronologically, valid on every filesystem)."""
     return datetime.now().strftime("%Y-%m-%d_%H%M%S")

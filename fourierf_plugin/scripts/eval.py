@@ -13,9 +13,10 @@ import imageio.v3 as iio
 import numpy as np
 import torch
 import tyro
+from rich.markup import escape
 
 from fourierf_plugin.engine.loading import load_run
-from fourierf_plugin.engine.run_dir import sanitize_name
+from fourierf_plugin.engine.run_dir import unique_safe_name
 from fourierf_plugin.utils.console import get_console, warn
 from fourierf_plugin.utils.errors import fail, run_cli, strip_verbose
 from fourierf_plugin.utils.lpips import LPIPS, default_lpips_weights
@@ -68,8 +69,9 @@ def evaluate(cfg: EvalConfig) -> dict:
         render_dir.mkdir(parents=True, exist_ok=True)
 
     per_image = []
+    stems: set[str] = set()  # names from the dataset, made safe and distinct as file names
     started = time.perf_counter()
-    for r in pipeline.render_views(cfg.split, step):
+    for index, r in enumerate(pipeline.render_views(cfg.split, step)):
         item = {
             "name": r.view.name,
             "view_id": r.view.view_id,
@@ -81,10 +83,11 @@ def evaluate(cfg: EvalConfig) -> dict:
             item["lpips"] = lpips.distance(r.rgb.to(device), r.target.to(device))
         per_image.append(item)
         if save_images:
-            iio.imwrite(render_dir / f"{sanitize_name(r.view.name)}.png", to_png(r.rgb))
-        console.print(
-            f"  {r.view.name}: psnr {item['psnr']:.2f}  ssim {item['ssim']:.4f}"
-            + (f"  lpips {item['lpips']:.4f}" if "lpips" in item else "")
+            iio.imwrite(render_dir / f"{unique_safe_name(r.view.name, index, stems)}.png", to_png(r.rgb))
+        console.print(  # names come from the dataset: "[x]" is not markup and ":b:" is no emoji
+            f"  {escape(r.view.name)}: psnr {item['psnr']:.2f}  ssim {item['ssim']:.4f}"
+            + (f"  lpips {item['lpips']:.4f}" if "lpips" in item else ""),
+            emoji=False,
         )
     total = time.perf_counter() - started
     if not per_image:

@@ -26,7 +26,7 @@ from fourierf_plugin.cameras.camera_paths import orbit_from_cameras, scale_camer
 from fourierf_plugin.cameras.cameras import Cameras
 from fourierf_plugin.data.datamanager import camera_rays
 from fourierf_plugin.engine.loading import LoadedRun, load_run
-from fourierf_plugin.engine.run_dir import sanitize_name
+from fourierf_plugin.engine.run_dir import unique_safe_name
 from fourierf_plugin.utils.colormaps import Colormap, colorize_accumulation, colorize_depth, depth_range, to_uint8
 from fourierf_plugin.utils.console import format_duration, get_console, warn
 from fourierf_plugin.utils.errors import UserError, fail, run_cli, strip_verbose
@@ -187,15 +187,8 @@ def validate(cfg: RenderConfig) -> list[str]:
 # -- cameras ------------------------------------------------------------------------------------------------------
 def _unique_stems(names: list[str]) -> list[str]:
     """Safe file stems for view names; a name that sanitises onto an earlier one gets its index appended."""
-    stems: list[str] = []
-    seen: set[str] = set()
-    for i, name in enumerate(names):
-        stem = sanitize_name(name)
-        if stem in seen:
-            stem = f"{stem}_{i:05d}"
-        seen.add(stem)
-        stems.append(stem)
-    return stems
+    taken: set[str] = set()
+    return [unique_safe_name(name, i, taken) for i, name in enumerate(names)]
 
 
 def spiral_bounds(near: float, far: float, depth_bounds: tuple[float, float] | None) -> tuple[float, float]:

@@ -7,6 +7,7 @@ import sys
 
 import tyro
 
+from fourierf_plugin.configs.option_checks import check_training_options
 from fourierf_plugin.engine.trainer import Trainer, TrainerConfig
 from fourierf_plugin.utils.errors import fail, run_cli, strip_verbose
 
@@ -29,6 +30,7 @@ def main(args: list[str] | None = None) -> None:
             fail(
                 "no scene given", "pass --data PATH_TO_SCENE (e.g. --data demo/lego_tiny), or --load-dir RUN to resume"
             )
+    check_training_options(config)  # before anything is built or a run directory is made
     Trainer(config).train()
 
 

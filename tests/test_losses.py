@@ -90,3 +90,20 @@ def test_losses_finite_for_tiny_inputs() -> None:
     lines = [torch.randn(1, 1), torch.randn(1, 2), torch.randn(1, 1)]
     for value in (grid_tv(planes, lines), grid_tv([], lines), density_l1(planes, lines), density_l1([], lines[:1])):
         assert value.shape == () and torch.isfinite(value)
+
+
+@pytest.mark.parametrize("shape", [(2, 4, 5), (1, 1, 6), (3, 6, 1), (2, 7, 7)])
+def test_tv_hand_written_backward_matches_gradcheck(shape: tuple[int, int, int]) -> None:
+    plane = torch.randn(shape, dtype=torch.float64, requires_grad=True)
+    if shape[1] > 1 or shape[2] > 1:
+        assert torch.autograd.gradcheck(total_variation_2d, (plane,))
+    line = torch.randn(shape[0], shape[2], dtype=torch.float64, requires_grad=True)
+    if shape[2] > 1:
+        assert torch.autograd.gradcheck(total_variation_1d, (line,))
+
+
+def test_mse_of_an_empty_batch_is_zero_not_nan() -> None:
+    pred = torch.zeros(0, 3, requires_grad=True)
+    value = mse(pred, torch.zeros(0, 3))
+    assert float(value.detach()) == 0.0
+    value.backward()

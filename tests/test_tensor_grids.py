@@ -301,3 +301,34 @@ def test_replace_makes_fresh_leaf_parameters(cls: type) -> None:
     loss = sum(f.sum() for f in grid.features(list(grid.planes), list(grid.lines), _rand_points(8)))
     loss.backward()
     assert all(p.grad is not None for p in grid.parameters())
+
+
+@pytest.mark.parametrize("shape", [(3, 6, 9), (2, 1, 5), (2, 5, 1), (4, 17, 11)])
+def test_gather_and_grid_sample_planes_agree_in_values_and_gradients(shape: tuple[int, int, int]) -> None:
+    """The CPU lookup (row gathers + index_add backward) is grid_sample's bilinear lookup, inside and outside."""
+    gen = torch.Generator().manual_seed(3)
+    u, v = torch.rand(2, 300, generator=gen, dtype=torch.float64) * 2.4 - 1.2
+    grad = torch.randn(300, shape[0], generator=gen, dtype=torch.float64)
+    results = []
+    for gather in (True, False):
+        plane = torch.randn(shape, generator=torch.Generator().manual_seed(1), dtype=torch.float64).requires_grad_()
+        out = interp_plane(plane, u, v, gather=gather)
+        out.backward(grad)
+        results.append((out.detach(), plane.grad))
+    torch.testing.assert_close(results[0][0], results[1][0], atol=1e-12, rtol=0)
+    torch.testing.assert_close(results[0][1], results[1][1], atol=1e-12, rtol=0)
+
+
+@pytest.mark.parametrize("length", [1, 2, 9])
+def test_gather_and_grid_sample_lines_agree_in_values_and_gradients(length: int) -> None:
+    coord = torch.linspace(-1.3, 1.3, 57, dtype=torch.float64)
+    grad = torch.randn(57, 4, generator=torch.Generator().manual_seed(5), dtype=torch.float64)
+    results = []
+    for gather in (True, False):
+        line = torch.randn(4, length, generator=torch.Generator().manual_seed(2), dtype=torch.float64)
+        line.requires_grad_()
+        out = interp_lines(line, coord, gather=gather)
+        out.backward(grad)
+        results.append((out.detach(), line.grad))
+    torch.testing.assert_close(results[0][0], results[1][0], atol=1e-12, rtol=0)
+    torch.testing.assert_close(results[0][1], results[1][1], atol=1e-12, rtol=0)

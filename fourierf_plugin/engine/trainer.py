@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import random
 import signal
 import time
@@ -12,9 +14,11 @@ from typing import ClassVar, Literal
 
 import numpy as np
 import torch
+from rich.markup import escape
 
 from fourierf_plugin import __version__
 from fourierf_plugin.configs.base import InstantiateConfig, load_config, save_config
+from fourierf_plugin.configs.option_checks import check_training_options
 from fourierf_plugin.engine.checkpoint import load_latest_checkpoint, save_checkpoint
 from fourierf_plugin.engine.optimizers import OptimizerConfig, build_optimizer, set_learning_rates
 from fourierf_plugin.engine.run_dir import make_run_dir
@@ -22,6 +26,7 @@ from fourierf_plugin.engine.scene_presets import apply_real_scene_preset
 from fourierf_plugin.pipelines.base import Pipeline, PipelineConfig
 from fourierf_plugin.utils.console import TrainingProgress, append_jsonl, format_duration, get_console, warn
 from fourierf_plugin.utils.errors import UserError, fail
+from fourierf_plugin.utils.phases import PhaseTimer, phase
 
 
 def pick_device(choice: str) -> torch.device:
@@ -39,6 +44,23 @@ def seed_everything(seed: int) -> torch.Generator:
     np.random.seed(seed % 2**32)
     torch.manual_seed(seed)
     return torch.Generator().manual_seed(seed)
+
+
+def drop_records_after(path: Path, step: int) -> None:
+    """Forget log lines past the checkpoint a run resumes from (a killed run logged steps it never saved).
+
+    Rewritten atomically, so a crash here cannot lose the log either.
+    """
+    if not path.is_file():
+        return
+    lines = path.read_text().splitlines(keepends=True)
+    kept = [line for line in lines if line.strip() and json.loads(line).get("step", 0) <= step]
+    kept = [line for line in kept if json.loads(line).get("event") != "done"]
+    if len(kept) == len(lines):
+        return
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text("".join(kept))
+    os.replace(tmp, path)
 
 
 class _DeferredInterrupt:
@@ -73,6 +95,7 @@ class Trainer:
         self.console = get_console()
         self.start_step = 0
         self.resume_state: dict | None = None
+        check_training_options(config)  # the Python API gets the same option checks as the CLI
         c = config
         if c.max_num_iterations < 1:
             fail(f"--max-num-iterations must be at least 1, got {c.max_num_iterations}", "pass a positive number")
@@ -148,9 +171,10 @@ class Trainer:
         model = self.pipeline.model
         d = scene.declaration
         self.console.print(
-            f"[bold]{self.config.method_name}[/bold] on {scene.scene_name}: run directory {self.run_dir}"
+            f"[bold]{escape(self.config.method_name)}[/bold] on {escape(scene.scene_name)}: "
+            f"run directory {escape(str(self.run_dir))}"
         )
-        self.console.print(f"training views ({len(scene.view_ids)}): {', '.join(scene.image_names)}")
+        self.console.print(f"training views ({len(scene.view_ids)}): {escape(', '.join(scene.image_names))}")
         self.console.print(f"scene effects: {model.effects.describe()} (declared: {d.describe()})")
         self.console.print(
             f"device {self.device}, grid {model.field.resolution}, {self.config.max_num_iterations} iterations, "
@@ -203,18 +227,26 @@ class Trainer:
             optimizer = build_optimizer(c.optimizer, model.param_groups())
         reset_steps = [s + 1 for s in model.reset_steps()]
         metrics_path = self.run_dir / "metrics.jsonl"
+        if self.start_step:
+            drop_records_after(metrics_path, self.start_step)
         started = time.perf_counter()
         done = self.start_step
+        # With --profile-phases the loop body is timed phase by phase (logging and saving excluded).
+        timer = PhaseTimer() if c.profile_phases else None
+        phase_totals: dict[str, float] = {}
         with _DeferredInterrupt() as interrupt, TrainingProgress(c.max_num_iterations, self.start_step) as progress:
             for step in range(self.start_step, c.max_num_iterations):
-                lr_scale = set_learning_rates(optimizer, c.optimizer, step, reset_steps, c.max_num_iterations)
-                loss, metrics = self.pipeline.train_step(step)
-                optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                optimizer.step()
-                changes = self.pipeline.after_step(step)
-                if changes.params_replaced:
-                    optimizer = build_optimizer(c.optimizer, model.param_groups())
+                with timer or contextlib.nullcontext(), phase("other"):
+                    lr_scale = set_learning_rates(optimizer, c.optimizer, step, reset_steps, c.max_num_iterations)
+                    loss, metrics = self.pipeline.train_step(step)
+                    with phase("backward"):
+                        optimizer.zero_grad(set_to_none=True)
+                        loss.backward()
+                    with phase("optimizer"):
+                        optimizer.step()
+                    changes = self.pipeline.after_step(step)
+                    if changes.params_replaced:
+                        optimizer = build_optimizer(c.optimizer, model.param_groups())
                 done = step + 1
                 f_density, f_color = model.cutoffs(step)
                 progress.update(done, loss=metrics["loss"], psnr=metrics["psnr"], f=f_density)
@@ -222,6 +254,10 @@ class Trainer:
                     record = {"step": done, **metrics, "f_density": f_density, "f_color": f_color, "lr_scale": lr_scale}
                     record["elapsed_s"] = time.perf_counter() - started
                     record["rays"] = int(self.pipeline.datamanager.active.numel())
+                    if timer is not None:
+                        record["phases"] = timer.take()
+                        for name, seconds in record["phases"].items():
+                            phase_totals[name] = phase_totals.get(name, 0.0) + seconds
                     append_jsonl(metrics_path, record)
                 if done % c.steps_per_save == 0 or done == c.max_num_iterations:
                     self.save(done, optimizer)
@@ -235,7 +271,12 @@ class Trainer:
             self.console.print(f"interrupted at step {done}: saved {path}")
             self.console.print(f"resume with: fourierf-train {c.method_name} --load-dir {self.run_dir}")
             raise SystemExit(130)
-        append_jsonl(metrics_path, {"event": "done", "step": done, "train_seconds": elapsed})
+        done_record = {"event": "done", "step": done, "train_seconds": elapsed}
+        if timer is not None:
+            for name, seconds in timer.take().items():
+                phase_totals[name] = phase_totals.get(name, 0.0) + seconds
+            done_record["phases_total"] = phase_totals
+        append_jsonl(metrics_path, done_record)
         self.console.print(
             f"trained {done - self.start_step} iterations in {format_duration(elapsed)}; run in {self.run_dir}"
         )
@@ -278,5 +319,7 @@ class TrainerConfig(InstantiateConfig):
     """Export a marching-cubes mesh of the geometry after these iterations (RUN/meshes/step-N.ply)."""
     export_mesh_resolution: int = 128
     """Grid resolution of the meshes exported during training."""
+    profile_phases: bool = False
+    """Time each phase of every iteration (filtering, sampling, field, backward, ...) into metrics.jsonl."""
     scene_preset: Literal["auto", "synthetic", "real"] = "auto"
     """Synthetic or real-scene settings; auto picks real for forward-facing scenes (flags you set always win)."""

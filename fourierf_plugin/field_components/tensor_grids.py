@@ -18,20 +18,76 @@ MAT_MODES: tuple[tuple[int, int], ...] = ((0, 1), (0, 2), (1, 2))
 VEC_MODES: tuple[int, ...] = (2, 1, 0)
 
 
-def interp_plane(plane: Tensor, u: Tensor, v: Tensor) -> Tensor:
+def _axis_corners(coord: Tensor, size: int) -> tuple[Tensor, Tensor, Tensor]:
+    """Lower/upper vertex indices and the fraction towards the upper one, for normalised coords (align_corners=True,
+    clamped to the border like ``padding_mode="border"``). A 1-vertex axis reads its only vertex."""
+    x = ((coord + 1.0) * (0.5 * (size - 1))).clamp(0, size - 1)
+    lower = x.floor().clamp(max=max(size - 2, 0)).long()
+    upper = (lower + 1).clamp(max=size - 1)
+    return lower, upper, x - lower
+
+
+class _GatherLookup(torch.autograd.Function):
+    """``Σ_k weights[:, k] · table[columns[:, k]]`` for a row-major [M, C] table, with a hand-written backward.
+
+    Why: on CPU ``grid_sample``'s backward scatters one point at a time (and a CSR product is slow on two
+    threads); row gathers plus one ``index_add_`` per corner are ~1.5x faster per training iteration.
+    """
+
+    @staticmethod
+    def forward(ctx, table: Tensor, columns: Tensor, weights: Tensor) -> Tensor:  # type: ignore[override]
+        ctx.save_for_backward(columns, weights)
+        ctx.table_shape = table.shape
+        out = table.index_select(0, columns[:, 0]) * weights[:, :1]
+        for k in range(1, columns.shape[1]):
+            out.addcmul_(table.index_select(0, columns[:, k]), weights[:, k : k + 1])
+        return out
+
+    @staticmethod
+    def backward(ctx, grad: Tensor) -> tuple[Tensor, None, None]:  # type: ignore[override]
+        columns, weights = ctx.saved_tensors
+        out = grad.new_zeros(ctx.table_shape)
+        for k in range(columns.shape[1]):
+            out.index_add_(0, columns[:, k], grad * weights[:, k : k + 1])
+        return out, None, None
+
+
+def _gather_lookup(table: Tensor, columns: Tensor, weights: Tensor) -> Tensor:
+    """Interpolate a [C, M] table at [N, K] corner columns with [N, K] weights -> [N, C]."""
+    return _GatherLookup.apply(table.T.contiguous(), columns, weights)
+
+
+def _use_gather(table: Tensor, *coords: Tensor) -> bool:
+    """The gather path on CPU; ``grid_sample`` elsewhere, or when gradients w.r.t. the points are wanted."""
+    return table.device.type == "cpu" and not any(c.requires_grad for c in coords)
+
+
+def interp_plane(plane: Tensor, u: Tensor, v: Tensor, gather: bool | None = None) -> Tensor:
     """Bilinear lookup of a [C, H, W] plane at normalised (u→W, v→H) in [-1, 1] (align_corners=True), -> [N, C].
 
-    ``grid_sample`` measured fastest on CPU for both passes (against index_select gathers); with
-    align_corners=True it returns stored values exactly at grid vertices.
+    Returns stored values exactly at grid vertices. On CPU four row gathers (fast backward); elsewhere
+    ``grid_sample`` (``gather`` forces either; both give the same values).
     """
-    grid = torch.stack([u, v], dim=-1).view(1, -1, 1, 2)
-    out = F.grid_sample(plane.unsqueeze(0), grid, mode="bilinear", align_corners=True, padding_mode="border")
-    return out.view(plane.shape[0], -1).T
+    if not (_use_gather(plane, u, v) if gather is None else gather):
+        grid = torch.stack([u, v], dim=-1).view(1, -1, 1, 2)
+        out = F.grid_sample(plane.unsqueeze(0), grid, mode="bilinear", align_corners=True, padding_mode="border")
+        return out.view(plane.shape[0], -1).T
+    c, h, w = plane.shape
+    x0, x1, fx = _axis_corners(u, w)
+    y0, y1, fy = _axis_corners(v, h)
+    gx, gy = 1.0 - fx, 1.0 - fy
+    columns = torch.stack([y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1], dim=1)
+    weights = torch.stack([gx * gy, fx * gy, gx * fy, fx * fy], dim=1).to(plane.dtype)
+    return _gather_lookup(plane.reshape(c, h * w), columns, weights)
 
 
-def interp_lines(line: Tensor, coord: Tensor) -> Tensor:
+def interp_lines(line: Tensor, coord: Tensor, gather: bool | None = None) -> Tensor:
     """Linear interpolation of a [C, L] line at normalised coords in [-1, 1] (align_corners=True), -> [N, C]."""
-    return interp_plane(line.unsqueeze(-1), torch.zeros_like(coord), coord)
+    if not (_use_gather(line, coord) if gather is None else gather):
+        return interp_plane(line.unsqueeze(-1), torch.zeros_like(coord), coord, gather=False)
+    x0, x1, fx = _axis_corners(coord, line.shape[1])
+    weights = torch.stack([1.0 - fx, fx], dim=1).to(line.dtype)
+    return _gather_lookup(line, torch.stack([x0, x1], dim=1), weights)
 
 
 class TensorGrid(nn.Module):

@@ -39,6 +39,7 @@ from fourierf_plugin.model_components.rendering import (
 )
 from fourierf_plugin.utils.console import get_console
 from fourierf_plugin.utils.errors import fail
+from fourierf_plugin.utils.phases import phase
 
 
 @dataclass
@@ -76,6 +77,8 @@ def occlusion_penalty(sigma: Tensor, fraction: float) -> Tensor:
     It penalises density right in front of the cameras, where few-shot training likes to paint floaters.
     """
     k = sigma.shape[-1]
+    if sigma.shape[0] == 0 or k == 0:
+        return sigma.sum()  # no rays: 0 with a graph, not the NaN of an empty mean
     m = max(1, round(fraction * k))
     return sigma[:, :m].sum(dim=-1).mean() / k
 
@@ -174,7 +177,8 @@ class FourieRFModel(nn.Module):
         """Filter the grids at this step's cutoffs once; call before ``forward`` (under no_grad for eval)."""
         f_d, f_c = self.cutoffs(step)
         fc = self.config.fourier
-        self.field.prepare(f_d, f_c, fc.plane_leakage, fc.app_planes_follow_density)
+        with phase("fourier_filter"):
+            self.field.prepare(f_d, f_c, fc.plane_leakage, fc.app_planes_follow_density)
 
     def forward(self, origins: Tensor, directions: Tensor, training: bool, background: Tensor | None = None) -> dict:
         """Render rays [R, 3] (unit directions; NDC directions as made). Returns rgb [R, 3], accumulation, depth [R]."""
@@ -184,40 +188,44 @@ class FourieRFModel(nn.Module):
             background = background_color(
                 self.background if training else self._eval_background(), num_rays, device, self.generator
             )
-        if self.ray_space == "ndc":
-            t, deltas = self._ndc_samples(origins, directions, training)
-        else:
-            t, deltas, t_exit = self._box_samples(origins, directions, training)
-        num_samples = t.shape[1]
-        xyz = origins.unsqueeze(1) + directions.unsqueeze(1) * t.unsqueeze(-1)
-        if self.ray_space == "ndc":
-            inside = ((xyz >= self.aabb[0]) & (xyz <= self.aabb[1])).all(dim=-1)
-            directions = directions / directions.norm(dim=-1, keepdim=True)
-        else:
-            inside = t < t_exit.unsqueeze(-1)
-        valid = inside.clone()
-        if self.occupancy.active and inside.any():
-            valid[inside] = self.occupancy.query(xyz[inside])
-        sigma = torch.zeros_like(t)
-        if valid.any():
-            sigma = sigma.index_put((valid,), self.field.density(xyz[valid]))
+        with phase("sampling"):
+            if self.ray_space == "ndc":
+                t, deltas = self._ndc_samples(origins, directions, training)
+            else:
+                t, deltas, t_exit = self._box_samples(origins, directions, training)
+            num_samples = t.shape[1]
+            xyz = origins.unsqueeze(1) + directions.unsqueeze(1) * t.unsqueeze(-1)
+            if self.ray_space == "ndc":
+                inside = ((xyz >= self.aabb[0]) & (xyz <= self.aabb[1])).all(dim=-1)
+                directions = directions / directions.norm(dim=-1, keepdim=True)
+            else:
+                inside = t < t_exit.unsqueeze(-1)
+            valid = inside.clone()
+            if self.occupancy.active and inside.any():
+                valid[inside] = self.occupancy.query(xyz[inside])
+        with phase("density"):
+            sigma = torch.zeros_like(t)
+            if valid.any():
+                sigma = sigma.index_put((valid,), self.field.density(xyz[valid]))
         grad_scale = floaters_scale(t) if self.config.floaters_gradient_scaling and training else None
         if grad_scale is not None:
             sigma = scale_gradient(sigma, grad_scale)
-        weights = composite_weights(sigma, deltas, self.config.distance_scale)
-
-        shade = weights.detach() > self.config.weight_threshold
-        colors = torch.zeros(num_rays, num_samples, 3, device=device, dtype=t.dtype)
-        if shade.any():
-            dirs = directions.unsqueeze(1).expand_as(xyz)[shade] if self.view_dependent else None
-            colors = colors.index_put((shade,), self.field.rgb(xyz[shade], dirs))
-            if grad_scale is not None:
-                colors = scale_gradient(colors, grad_scale.unsqueeze(-1))
-        acc = weights.sum(dim=-1)
-        rgb = blend_background(accumulate(weights, colors), acc, background)
-        if not training:
-            rgb = rgb.clamp(0.0, 1.0)
-        depth = expected_depth(weights, t, torch.full_like(acc, self.far))
+        with phase("compositing"):
+            weights = composite_weights(sigma, deltas, self.config.distance_scale)
+            shade = weights.detach() > self.config.weight_threshold
+        with phase("appearance"):
+            colors = torch.zeros(num_rays, num_samples, 3, device=device, dtype=t.dtype)
+            if shade.any():
+                dirs = directions.unsqueeze(1).expand_as(xyz)[shade] if self.view_dependent else None
+                colors = colors.index_put((shade,), self.field.rgb(xyz[shade], dirs))
+                if grad_scale is not None:
+                    colors = scale_gradient(colors, grad_scale.unsqueeze(-1))
+        with phase("compositing"):
+            acc = weights.sum(dim=-1)
+            rgb = blend_background(accumulate(weights, colors), acc, background)
+            if not training:
+                rgb = rgb.clamp(0.0, 1.0)
+            depth = expected_depth(weights, t, torch.full_like(acc, self.far))
         out = {"rgb": rgb, "accumulation": acc, "depth": depth, "background": background}
         if training and self.effects.occlusion_regularization:
             out["occlusion"] = occlusion_penalty(sigma, self.config.occlusion_fraction)

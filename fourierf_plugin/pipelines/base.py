@@ -16,6 +16,7 @@ from fourierf_plugin.data.dataparser_base import Split
 from fourierf_plugin.model_components.rendering import background_color
 from fourierf_plugin.models.fourierf import Changes, FourieRFModel, FourieRFModelConfig
 from fourierf_plugin.utils.console import get_console
+from fourierf_plugin.utils.phases import phase
 
 
 @dataclass
@@ -63,22 +64,25 @@ class Pipeline:
 
     def train_step(self, step: int) -> tuple[Tensor, dict[str, float]]:
         """Loss for one batch at ``step``; the grids are filtered once here and reused by every term."""
-        batch = self.datamanager.next_batch()
+        with phase("data"):
+            batch = self.datamanager.next_batch()
         self.model.prepare(step)
         outputs = self.model(batch.origins, batch.directions, training=True)
-        loss_terms = self.model.loss_dict(outputs, batch.rgba, step)
-        loss = torch.stack(list(loss_terms.values())).sum()
+        with phase("losses"):
+            loss_terms = self.model.loss_dict(outputs, batch.rgba, step)
+            loss = torch.stack(list(loss_terms.values())).sum()
         metrics = {k: float(v.detach()) for k, v in loss_terms.items()}
         metrics["loss"] = float(loss.detach())
         metrics["psnr"] = -10.0 * torch.log10(loss_terms["mse"].detach().clamp(min=1e-10)).item()
         return loss, metrics
 
     def after_step(self, step: int) -> Changes:
-        changes = self.model.after_step(step)
-        if changes.filter_rays:
-            before = int(self.datamanager.active.numel())
-            after = self.datamanager.keep_rays(self.model.rays_hit_occupancy)
-            get_console().print(f"ray filtering: kept {after} of {before} training rays")
+        with phase("structure"):
+            changes = self.model.after_step(step)
+            if changes.filter_rays:
+                before = int(self.datamanager.active.numel())
+                after = self.datamanager.keep_rays(self.model.rays_hit_occupancy)
+                get_console().print(f"ray filtering: kept {after} of {before} training rays")
         return changes
 
     def render_views(self, split: Split, step: int) -> Iterator[RenderedView]:

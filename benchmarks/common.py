@@ -11,14 +11,14 @@ import json
 import os
 import platform
 import shutil
-import subprocess
 import sys
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from fourierf_plugin.bench.runner import run_timed
 
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
@@ -40,15 +40,6 @@ class Run:
     @property
     def key(self) -> str:
         return f"{self.method}_{self.views}_{self.iters}_s{self.seed}"
-
-
-def run_timed(cmd: list[str], log: Path) -> tuple[float, float, int]:
-    """Wall seconds, peak RSS (GB) and exit code of one child process."""
-    start = time.perf_counter()
-    with log.open("w") as fh:
-        proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=REPO)
-        _, status, usage = os.wait4(proc.pid, 0)
-    return time.perf_counter() - start, usage.ru_maxrss / 1024**2, os.waitstatus_to_exitcode(status)
 
 
 def train_and_eval(

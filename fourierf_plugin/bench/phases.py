@@ -11,10 +11,9 @@ import json
 from pathlib import Path
 
 from fourierf_plugin.bench.sweep import FINAL_TAIL
+from fourierf_plugin.utils import phases as profiler
 
 FOURIER_PHASES = ("fourier_filter", "fourier_filter_backward")
-TOTAL_NAMES = ("total", "iteration")
-"""A phase with one of these names is the denominator itself, not a part of it."""
 
 
 def read_metrics(path: Path) -> list[dict]:
@@ -51,38 +50,32 @@ def phases_total(records: list[dict]) -> dict[str, float] | None:
 
 def phases_final(records: list[dict], iters: int, tail: float = FINAL_TAIL) -> dict[str, float] | None:
     """Phase seconds summed over the log intervals that lie wholly in the last ``tail`` of the steps."""
-    start = (1.0 - tail) * iters
+    summed, _ = phases_after(records, (1.0 - tail) * iters)
+    return summed or None
+
+
+def phases_after(records: list[dict], start: float) -> tuple[dict[str, float], int]:
+    """Phase seconds summed over the log intervals that begin at or after step ``start``, and how many steps
+    those intervals cover."""
     summed: dict[str, float] = {}
-    previous_step = 0
+    previous_step, steps = 0, 0
     for record in log_records(records):
         step = int(record["step"])
         if previous_step >= start and isinstance(record.get("phases"), dict):
             for name, seconds in record["phases"].items():
                 summed[name] = summed.get(name, 0.0) + float(seconds)
+            steps += step - previous_step
         previous_step = step
-    return summed or None
-
-
-def denominator(phases: dict[str, float]) -> float:
-    """The time the phases are shares of: an explicit total when the profiler gives one, else their sum."""
-    for name in TOTAL_NAMES:
-        if name in phases:
-            return float(phases[name])
-    return float(sum(phases.values()))
+    return summed, steps
 
 
 def shares(phases: dict[str, float]) -> dict[str, float]:
-    """Each phase's share of iteration time (the total itself is left out), largest first."""
-    total = denominator(phases)
-    parts = {k: v for k, v in phases.items() if k not in TOTAL_NAMES}
-    if total <= 0:
-        return dict.fromkeys(parts, 0.0)
-    return dict(sorted(((k, v / total) for k, v in parts.items()), key=lambda kv: -kv[1]))
+    """Each phase's share of iteration time (the profiler's phases are exclusive, so they sum to it), largest first."""
+    return dict(sorted(profiler.shares(phases).items(), key=lambda kv: -kv[1]))
 
 
 def fourier_share(phases: dict[str, float] | None) -> float | None:
     """(fourier_filter + fourier_filter_backward) / total; None without a breakdown or without any filtering phase."""
     if not phases or not any(name in phases for name in FOURIER_PHASES):
         return None
-    total = denominator(phases)
-    return sum(phases.get(name, 0.0) for name in FOURIER_PHASES) / total if total > 0 else None
+    return sum(profiler.shares(phases).get(name, 0.0) for name in FOURIER_PHASES)

@@ -243,7 +243,7 @@ def phase_section(all_curves: Sequence[Curve]) -> list[str]:
     for name in order:
         cells = [_f(100 * s[name], 1, "%") if name in s else "—" for s in share_cols]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    lines.append("| total s | " + " | ".join(_f(ph.denominator(p), 1) for _, p in columns) + " |")
+    lines.append("| total s | " + " | ".join(_f(sum(p.values()), 1) for _, p in columns) + " |")
     lines.append("")
     for c in profiled:
         whole, tail = ph.fourier_share(c.record.get("phases_total")), ph.fourier_share(c.record.get("phases_final"))

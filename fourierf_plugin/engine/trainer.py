@@ -8,6 +8,7 @@ import os
 import random
 import signal
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar, Literal
@@ -54,8 +55,8 @@ def drop_records_after(path: Path, step: int) -> None:
     if not path.is_file():
         return
     lines = path.read_text().splitlines(keepends=True)
-    kept = [line for line in lines if line.strip() and json.loads(line).get("step", 0) <= step]
-    kept = [line for line in kept if json.loads(line).get("event") != "done"]
+    records = [(line, json.loads(line)) for line in lines if line.strip()]
+    kept = [line for line, r in records if r.get("step", 0) <= step and r.get("event") != "done"]
     if len(kept) == len(lines):
         return
     tmp = path.with_name(path.name + ".tmp")
@@ -233,7 +234,7 @@ class Trainer:
         done = self.start_step
         # With --profile-phases the loop body is timed phase by phase (logging and saving excluded).
         timer = PhaseTimer() if c.profile_phases else None
-        phase_totals: dict[str, float] = {}
+        phase_totals: Counter[str] = Counter()  # update() adds the seconds of each log interval
         with _DeferredInterrupt() as interrupt, TrainingProgress(c.max_num_iterations, self.start_step) as progress:
             for step in range(self.start_step, c.max_num_iterations):
                 with timer or contextlib.nullcontext(), phase("other"):
@@ -256,8 +257,7 @@ class Trainer:
                     record["rays"] = int(self.pipeline.datamanager.active.numel())
                     if timer is not None:
                         record["phases"] = timer.take()
-                        for name, seconds in record["phases"].items():
-                            phase_totals[name] = phase_totals.get(name, 0.0) + seconds
+                        phase_totals.update(record["phases"])
                     append_jsonl(metrics_path, record)
                 if done % c.steps_per_save == 0 or done == c.max_num_iterations:
                     self.save(done, optimizer)
@@ -273,9 +273,8 @@ class Trainer:
             raise SystemExit(130)
         done_record = {"event": "done", "step": done, "train_seconds": elapsed}
         if timer is not None:
-            for name, seconds in timer.take().items():
-                phase_totals[name] = phase_totals.get(name, 0.0) + seconds
-            done_record["phases_total"] = phase_totals
+            phase_totals.update(timer.take())
+            done_record["phases_total"] = dict(phase_totals)
         append_jsonl(metrics_path, done_record)
         self.console.print(
             f"trained {done - self.start_step} iterations in {format_duration(elapsed)}; run in {self.run_dir}"

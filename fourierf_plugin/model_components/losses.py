@@ -45,21 +45,23 @@ class _SquaredDifferences(torch.autograd.Function):
         return out, None, None
 
 
+def _total_variation(x: Tensor, dims: tuple[int, ...]) -> Tensor:
+    """``Σ_d 2 Σ(Δ_d x)² / (number of differences along d)`` over the dims longer than 1 (0 when there are none)."""
+    dims = tuple(d for d in dims if x.shape[d] > 1)
+    if not dims:
+        return x.new_zeros(())
+    scales = tuple(2.0 * x.shape[d] / (x.numel() * (x.shape[d] - 1)) for d in dims)
+    return _SquaredDifferences.apply(x, dims, scales)
+
+
 def total_variation_2d(plane: Tensor) -> Tensor:
     """TensoRF's TV of a [C, H, W] plane: 2 (Σ(Δ_h)²/(C(H-1)W) + Σ(Δ_w)²/(CH(W-1))); 0 along 1-wide axes."""
-    c, h, w = plane.shape
-    dims = [(d, 2.0 / (c * (h - 1) * w) if d == 1 else 2.0 / (c * h * (w - 1))) for d, n in ((1, h), (2, w)) if n > 1]
-    if not dims:
-        return plane.new_zeros(())
-    return _SquaredDifferences.apply(plane, tuple(d for d, _ in dims), tuple(s for _, s in dims))
+    return _total_variation(plane, (1, 2))
 
 
 def total_variation_1d(line: Tensor) -> Tensor:
     """TV of a [C, L] line, normalised like the planes: 2 Σ(Δ)² / (C(L-1))."""
-    c, length = line.shape
-    if length < 2:
-        return line.new_zeros(())
-    return _SquaredDifferences.apply(line, (1,), (2.0 / (c * (length - 1)),))
+    return _total_variation(line, (1,))
 
 
 def grid_tv(

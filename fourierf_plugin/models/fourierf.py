@@ -204,9 +204,10 @@ class FourieRFModel(nn.Module):
             if self.occupancy.active and inside.any():
                 valid[inside] = self.occupancy.query(xyz[inside])
         with phase("density"):
-            sigma = torch.zeros_like(t)
-            if valid.any():
-                sigma = sigma.index_put((valid,), self.field.density(xyz[valid]))
+            if training or self.config.eval_stop_transmittance <= 0:
+                sigma = self._density_at(xyz, valid)
+            else:
+                sigma = self._density_until_opaque(xyz, valid, deltas)
         grad_scale = floaters_scale(t) if self.config.floaters_gradient_scaling and training else None
         if grad_scale is not None:
             sigma = scale_gradient(sigma, grad_scale)
@@ -230,6 +231,34 @@ class FourieRFModel(nn.Module):
         if training and self.effects.occlusion_regularization:
             out["occlusion"] = occlusion_penalty(sigma, self.config.occlusion_fraction)
         return out
+
+    def _density_at(self, xyz: Tensor, valid: Tensor) -> Tensor:
+        """σ [R, N]: the field at the valid samples, 0 elsewhere."""
+        sigma = torch.zeros(valid.shape, device=xyz.device, dtype=xyz.dtype)
+        if valid.any():
+            sigma = sigma.index_put((valid,), self.field.density(xyz[valid]))
+        return sigma
+
+    def _density_until_opaque(self, xyz: Tensor, valid: Tensor, deltas: Tensor) -> Tensor:
+        """σ [R, N] marched in segments; a ray stops being queried once its transmittance falls below
+        ``eval_stop_transmittance`` (early ray termination: what lies behind an opaque surface cannot show)."""
+        sigma = torch.zeros(valid.shape, device=xyz.device, dtype=xyz.dtype)
+        depth = torch.zeros(valid.shape[0], device=xyz.device, dtype=xyz.dtype)
+        max_depth = -math.log(self.config.eval_stop_transmittance)
+        segment = self.config.eval_segment_samples
+        for start in range(0, valid.shape[1], segment):
+            cols = slice(start, start + segment)
+            alive = depth < max_depth
+            if not alive.any():
+                break
+            live = valid[:, cols] & alive.unsqueeze(-1)
+            if not live.any():
+                continue
+            part = torch.zeros(live.shape, device=xyz.device, dtype=xyz.dtype)
+            part[live] = self.field.density(xyz[:, cols][live])
+            sigma[:, cols] = part
+            depth = depth + (part * deltas[:, cols]).sum(dim=-1) * self.config.distance_scale
+        return sigma
 
     def _box_samples(self, origins: Tensor, directions: Tensor, training: bool) -> tuple[Tensor, Tensor, Tensor]:
         """Fixed-step marching from the box entry (unit directions, metric t), per-ray jitter in training.
@@ -424,5 +453,9 @@ class FourieRFModelConfig(InstantiateConfig):
     """Share of each ray, from its start, whose densities the occlusion term penalises (FreeNeRF: 20 of 128)."""
     floaters_gradient_scaling: bool = False
     """'Floaters No More': scale density and colour gradients by clamp(t², 0, 1) (t: the ray parameter)."""
-    eval_chunk_rays: int = 4096
-    """Rays per chunk when rendering whole images."""
+    eval_chunk_rays: int = 1024
+    """Rays per chunk when rendering whole images (small chunks keep the temporaries in the recycled heap)."""
+    eval_stop_transmittance: float = 1e-4
+    """Evaluation renders stop querying a ray once its transmittance is below this (0 = march every sample)."""
+    eval_segment_samples: int = 32
+    """Samples per ray marched between early-termination checks at evaluation."""

@@ -8,6 +8,8 @@ import traceback
 from collections.abc import Callable
 from typing import NoReturn, TypeVar
 
+from fourierf_plugin.utils.allocator import keep_freed_memory
+
 T = TypeVar("T")
 
 EXIT_USER_ERROR = 2
@@ -36,8 +38,11 @@ def _verbose_requested(argv: list[str]) -> bool:
 
 
 def run_cli(main: Callable[[], T], argv: list[str] | None = None) -> T:
-    """Run an entry point; a :class:`UserError` becomes one red message on stderr and exit code 2."""
+    """Run an entry point; a :class:`UserError` becomes one red message on stderr and exit code 2.
+
+    Every console script starts here, so this is also where the allocator is tuned for tensor work."""
     argv = sys.argv[1:] if argv is None else argv
+    keep_freed_memory()
     try:
         return main()
     except UserError as err:

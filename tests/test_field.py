@@ -6,7 +6,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig, FourierTensoRFField
+from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig, FourierTensoRFField, use_bfloat16
 
 AABB = torch.tensor([[-1.5, -0.5, 0.0], [1.5, 2.5, 1.0]])
 RESO = [5, 7, 9]
@@ -217,3 +217,30 @@ def test_rgb_basis_input_width() -> None:
     assert vm.basis.in_features == sum(vm.config.appearance_components)
     assert cp.basis.in_features == cp.config.appearance_components[0]
     assert vm.basis.bias is None
+
+
+# -- decoder precision ------------------------------------------------------------------------------------------------
+def _rgb_with(precision: str, xyz: torch.Tensor) -> tuple[torch.Tensor, list[torch.Tensor]]:
+    torch.manual_seed(0)  # the decoder's layers draw from the global generator
+    field = _field(decoder_precision=precision)
+    field.prepare(1.0, 1.0)
+    rgb = field.rgb(xyz, None)
+    rgb.sum().backward()
+    return rgb.detach(), [p.grad for p in field.parameters() if p.grad is not None]
+
+
+def test_bfloat16_decoder_matches_float32_to_its_precision_with_finite_gradients() -> None:
+    xyz = torch.rand(500, 3, generator=torch.Generator().manual_seed(2)) * 2 - 1
+    ref, _ = _rgb_with("float32", xyz)
+    low, grads = _rgb_with("bfloat16", xyz)
+    assert low.dtype == torch.float32
+    err = (low - ref).abs().max().item()
+    assert 0 < err < 1e-2, err  # it did run in bf16 (not bit-equal) and stays within a few bf16 ulps of a colour
+    assert grads and all(bool(torch.isfinite(g).all()) for g in grads)
+
+
+def test_auto_precision_follows_the_cpu_and_never_downcasts_float64() -> None:
+    f32 = torch.zeros(2, 3)
+    assert use_bfloat16("auto", f32) == bool(torch.cpu._is_avx512_bf16_supported())
+    assert use_bfloat16("bfloat16", f32) and not use_bfloat16("float32", f32)
+    assert not use_bfloat16("bfloat16", f32.double())

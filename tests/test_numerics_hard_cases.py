@@ -43,6 +43,7 @@ def small_field(**overrides) -> FieldConfig:
         appearance_components=(3, 3, 3),
         appearance_dim=6,
         hidden_dim=16,
+        decoder_precision="float32",  # the float64 comparisons below test geometry, not the bf16 decoder
     )
     return FieldConfig(**{**base, **overrides})
 

@@ -11,10 +11,12 @@ from torch import nn
 from fourierf_plugin.field_components.tensor_grids import (
     MAT_MODES,
     VEC_MODES,
+    RowTable,
     TensorCP,
     TensorVM,
     interp_lines,
     interp_plane,
+    row_table,
 )
 
 RESO = (5, 7, 9)
@@ -332,3 +334,36 @@ def test_gather_and_grid_sample_lines_agree_in_values_and_gradients(length: int)
         results.append((out.detach(), line.grad))
     torch.testing.assert_close(results[0][0], results[1][0], atol=1e-12, rtol=0)
     torch.testing.assert_close(results[0][1], results[1][1], atol=1e-12, rtol=0)
+
+
+@pytest.mark.parametrize("cls", [TensorVM, TensorCP])
+def test_row_tables_give_the_same_features(cls: type) -> None:
+    """Evaluation reads pre-transposed copies (``RowTable``): same values as the per-call transpose, bit for bit."""
+    grid = cls([9, 6, 7], (3, 3, 3), 0.5, torch.Generator().manual_seed(0))
+    xyz = torch.rand(200, 3, generator=torch.Generator().manual_seed(1)) * 2.2 - 1.1  # some points off the grid
+    planes, lines = list(grid.planes), list(grid.lines)
+    with torch.no_grad():
+        plain = grid.features(planes, lines, xyz)
+        tables = grid.features([row_table(p) for p in planes], [row_table(x) for x in lines], xyz)
+    for a, b in zip(plain, tables, strict=True):
+        assert torch.equal(a, b)
+
+
+def test_row_tables_are_built_only_for_evaluation() -> None:
+    from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig, FourierTensoRFField
+
+    field = FourierTensoRFField(
+        FieldConfig(density_components=(2, 2, 2), appearance_components=(2, 2, 2)),
+        torch.tensor([[-1.0] * 3, [1.0] * 3]), [5, 6, 7], False, torch.Generator().manual_seed(0),
+    )  # fmt: skip
+    field.prepare(0.5, 0.5)
+    assert field.filtered.lookup is None  # training: lookups differentiate through the filtered tensors
+    with torch.no_grad():
+        field.prepare(0.5, 0.5)
+    assert field.filtered.lookup is not None
+    assert all(isinstance(t, RowTable) for t in field.filtered.lookup_factors("density")[0])
+    xyz = torch.rand(50, 3) * 2 - 1
+    with torch.no_grad():
+        evaluated = field.density(xyz)
+    field.prepare(0.5, 0.5)
+    torch.testing.assert_close(field.density(xyz).detach(), evaluated)

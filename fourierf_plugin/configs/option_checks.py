@@ -79,7 +79,7 @@ RULES: tuple[Rule, ...] = (
     Rule(f"{_MODEL}.occlusion_fraction", within(1e-9, 1.0), "a fraction of the ray in (0, 1]", "0.15625"),
     Rule(f"{_MODEL}.eval_chunk_rays", int_at_least(1), "an integer >= 1", "1024"),
     Rule(f"{_MODEL}.eval_stop_transmittance", within(0.0, 0.5), "a transmittance in [0, 0.5]", "1e-4"),
-    Rule(f"{_MODEL}.eval_segment_samples", int_at_least(1), "an integer >= 1", "32"),
+    Rule(f"{_MODEL}.eval_segment_samples", int_at_least(1), "an integer >= 1", "128"),
     Rule(f"{_MODEL}.field.n_voxels_init", int_at_least(8), "a voxel count >= 8 (2 per axis)", "2097152"),
     Rule(f"{_MODEL}.field.n_voxels_final", int_at_least(8), "a voxel count >= 8 (2 per axis)", "27000000"),
     Rule(f"{_MODEL}.field.density_components", each(int_at_least(1)), "component counts >= 1", "16 16 16"),

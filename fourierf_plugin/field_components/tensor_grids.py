@@ -9,6 +9,7 @@ which keeps the filtering in one place and the lookups pure.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import torch
 import torch.nn.functional as F
@@ -52,41 +53,66 @@ class _GatherLookup(torch.autograd.Function):
         return out, None, None
 
 
-def _gather_lookup(table: Tensor, columns: Tensor, weights: Tensor) -> Tensor:
-    """Interpolate a [C, M] table at [N, K] corner columns with [N, K] weights -> [N, C]."""
-    return _GatherLookup.apply(table.T.contiguous(), columns, weights)
+class RowTable(NamedTuple):
+    """A plane [C, H, W] or line [C, L] already laid out row-major as [H·W or L, C] for the gather path.
+
+    Why: the transpose costs as much as a lookup; an evaluation render looks the same grids up thousands of times,
+    so it transposes once (``row_table``) instead of per call.
+    """
+
+    rows: Tensor
+    shape: torch.Size
 
 
-def _use_gather(table: Tensor, *coords: Tensor) -> bool:
+def row_table(factor: Tensor) -> RowTable:
+    return RowTable(factor.reshape(factor.shape[0], -1).T.contiguous(), factor.shape)
+
+
+Factor = Tensor | RowTable
+
+
+def _dtype(factor: Factor) -> torch.dtype:
+    return factor.rows.dtype if isinstance(factor, RowTable) else factor.dtype
+
+
+def _gather_lookup(table: Factor, columns: Tensor, weights: Tensor) -> Tensor:
+    """Interpolate a [C, M] table (or its row-major copy) at [N, K] corner columns with [N, K] weights -> [N, C]."""
+    rows = table.rows if isinstance(table, RowTable) else table.reshape(table.shape[0], -1).T.contiguous()
+    return _GatherLookup.apply(rows, columns, weights)
+
+
+def _use_gather(table: Factor, *coords: Tensor) -> bool:
     """The gather path on CPU; ``grid_sample`` elsewhere, or when gradients w.r.t. the points are wanted."""
+    if isinstance(table, RowTable):
+        return True
     return table.device.type == "cpu" and not any(c.requires_grad for c in coords)
 
 
-def interp_plane(plane: Tensor, u: Tensor, v: Tensor, gather: bool | None = None) -> Tensor:
+def interp_plane(plane: Factor, u: Tensor, v: Tensor, gather: bool | None = None) -> Tensor:
     """Bilinear lookup of a [C, H, W] plane at normalised (u→W, v→H) in [-1, 1] (align_corners=True), -> [N, C].
 
     Returns stored values exactly at grid vertices. On CPU four row gathers (fast backward); elsewhere
     ``grid_sample`` (``gather`` forces either; both give the same values).
     """
-    if not (_use_gather(plane, u, v) if gather is None else gather):
+    if not isinstance(plane, RowTable) and not (_use_gather(plane, u, v) if gather is None else gather):
         grid = torch.stack([u, v], dim=-1).view(1, -1, 1, 2)
         out = F.grid_sample(plane.unsqueeze(0), grid, mode="bilinear", align_corners=True, padding_mode="border")
         return out.view(plane.shape[0], -1).T
-    c, h, w = plane.shape
+    h, w = plane.shape[-2:]
     x0, x1, fx = _axis_corners(u, w)
     y0, y1, fy = _axis_corners(v, h)
     gx, gy = 1.0 - fx, 1.0 - fy
     columns = torch.stack([y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1], dim=1)
-    weights = torch.stack([gx * gy, fx * gy, gx * fy, fx * fy], dim=1).to(plane.dtype)
-    return _gather_lookup(plane.reshape(c, h * w), columns, weights)
+    weights = torch.stack([gx * gy, fx * gy, gx * fy, fx * fy], dim=1).to(_dtype(plane))
+    return _gather_lookup(plane, columns, weights)
 
 
-def interp_lines(line: Tensor, coord: Tensor, gather: bool | None = None) -> Tensor:
+def interp_lines(line: Factor, coord: Tensor, gather: bool | None = None) -> Tensor:
     """Linear interpolation of a [C, L] line at normalised coords in [-1, 1] (align_corners=True), -> [N, C]."""
-    if not (_use_gather(line, coord) if gather is None else gather):
+    if not isinstance(line, RowTable) and not (_use_gather(line, coord) if gather is None else gather):
         return interp_plane(line.unsqueeze(-1), torch.zeros_like(coord), coord, gather=False)
     x0, x1, fx = _axis_corners(coord, line.shape[1])
-    weights = torch.stack([1.0 - fx, fx], dim=1).to(line.dtype)
+    weights = torch.stack([1.0 - fx, fx], dim=1).to(_dtype(line))
     return _gather_lookup(line, torch.stack([x0, x1], dim=1), weights)
 
 
@@ -112,7 +138,7 @@ class TensorGrid(nn.Module):
     # -- queries ----------------------------------------------------------------------------------------------
     line_axes: tuple[int, ...] = VEC_MODES
 
-    def features(self, planes: Sequence[Tensor], lines: Sequence[Tensor], xyz: Tensor) -> list[Tensor]:
+    def features(self, planes: Sequence[Factor], lines: Sequence[Factor], xyz: Tensor) -> list[Tensor]:
         """Per-component features [N, C_i] for each factor group, from the given (filtered) tensors."""
         raise NotImplementedError
 
@@ -159,7 +185,7 @@ class TensorVM(TensorGrid):
             self.planes.append(nn.Parameter(init_scale * torch.randn(c, reso[m1], reso[m0], generator=generator)))
             self.lines.append(nn.Parameter(init_scale * torch.randn(c, reso[v], generator=generator)))
 
-    def features(self, planes: Sequence[Tensor], lines: Sequence[Tensor], xyz: Tensor) -> list[Tensor]:
+    def features(self, planes: Sequence[Factor], lines: Sequence[Factor], xyz: Tensor) -> list[Tensor]:
         return [
             interp_plane(p, xyz[:, m0], xyz[:, m1]) * interp_lines(line, xyz[:, v])
             for p, line, (m0, m1), v in zip(planes, lines, MAT_MODES, VEC_MODES, strict=True)
@@ -180,7 +206,7 @@ class TensorCP(TensorGrid):
         for axis in range(3):
             self.lines.append(nn.Parameter(init_scale * torch.randn(c, reso[axis], generator=generator)))
 
-    def features(self, planes: Sequence[Tensor], lines: Sequence[Tensor], xyz: Tensor) -> list[Tensor]:
+    def features(self, planes: Sequence[Factor], lines: Sequence[Factor], xyz: Tensor) -> list[Tensor]:
         out = interp_lines(lines[0], xyz[:, 0])
         for axis in (1, 2):
             out = out * interp_lines(lines[axis], xyz[:, axis])

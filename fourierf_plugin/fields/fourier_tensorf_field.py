@@ -7,6 +7,7 @@ old shape can never be read.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Literal
 
@@ -16,7 +17,7 @@ from torch import Tensor, nn
 
 from fourierf_plugin.field_components.decoder import AppearanceDecoder
 from fourierf_plugin.field_components.fourier import filter_lines, filter_planes
-from fourierf_plugin.field_components.tensor_grids import TensorCP, TensorGrid, TensorVM
+from fourierf_plugin.field_components.tensor_grids import Factor, TensorCP, TensorGrid, TensorVM, row_table
 
 
 @dataclass
@@ -25,6 +26,24 @@ class FilteredGrids:
     density_lines: list[Tensor]
     appearance_planes: list[Tensor]
     appearance_lines: list[Tensor]
+    lookup: dict[str, tuple[list[Factor], list[Factor]]] | None = None
+    """Row-major copies for the lookups of an evaluation on CPU (built once per ``prepare``, see ``RowTable``)."""
+
+    def lookup_factors(self, kind: str) -> tuple[list[Factor], list[Factor]]:
+        """The factors the ``kind`` ("density" or "appearance") lookups read."""
+        if self.lookup is not None:
+            return self.lookup[kind]
+        return getattr(self, f"{kind}_planes"), getattr(self, f"{kind}_lines")
+
+    def with_row_tables(self) -> FilteredGrids:
+        tables = {
+            kind: (
+                [row_table(p) for p in getattr(self, f"{kind}_planes")],
+                [row_table(x) for x in getattr(self, f"{kind}_lines")],
+            )
+            for kind in ("density", "appearance")
+        }
+        return dataclasses.replace(self, lookup=tables)
 
 
 @dataclass
@@ -47,12 +66,22 @@ class FieldConfig:
     """Added to the density feature before softplus (softplus(x - 10) ≈ 4.5e-5 at 0); ReLU takes no shift."""
     density_activation: Literal["softplus", "relu"] = "softplus"
     """Density activation; TensoRF uses softplus for synthetic and ReLU for LLFF scenes."""
+    decoder_precision: Literal["auto", "float32", "bfloat16"] = "auto"
+    """Arithmetic of the appearance basis and decoder (the grids always stay float32). auto: bfloat16 on a CPU with
+    native bf16 matmuls (2.7x faster there; colour error ~1e-3, far below few-shot error), float32 elsewhere."""
     n_voxels_init: int = 128**3
     """Voxel budget at the start (per-axis resolution follows the box's aspect ratio)."""
     n_voxels_final: int = 300**3
     """Voxel budget after the last upsample."""
     upsample_fractions: tuple[float, ...] = (0.3, 0.7)
     """When to upsample, as fractions of the run (log-spaced voxel counts)."""
+
+
+def use_bfloat16(precision: str, features: Tensor) -> bool:
+    """Whether the decoder runs in bfloat16 for these (float32, CPU) features; float64 models are never downcast."""
+    if precision == "float32" or features.dtype != torch.float32 or features.device.type != "cpu":
+        return False
+    return precision == "bfloat16" or bool(torch.cpu._is_avx512_bf16_supported())
 
 
 class FourierTensoRFField(nn.Module):
@@ -87,7 +116,10 @@ class FourierTensoRFField(nn.Module):
 
     def prepare(self, f_density: float, f_color: float, plane_leakage: float = 0.0, app_follow: bool = False) -> None:
         """Filter once for this iteration (or this evaluation) and cache the result for every lookup."""
-        self._filtered = self.filtered_grids(f_density, f_color, plane_leakage, app_follow)
+        filtered = self.filtered_grids(f_density, f_color, plane_leakage, app_follow)
+        if not torch.is_grad_enabled() and self.aabb.device.type == "cpu":
+            filtered = filtered.with_row_tables()  # many lookups of fixed grids follow: transpose them once
+        self._filtered = filtered
 
     def invalidate(self) -> None:
         self._filtered = None
@@ -110,9 +142,8 @@ class FourierTensoRFField(nn.Module):
     # -- queries ----------------------------------------------------------------------------------------------
     def density(self, xyz: Tensor) -> Tensor:
         """Volume density σ ≥ 0 at world points [N, 3] -> [N]."""
-        g = self.filtered
         x = self.normalize(xyz)
-        feats = self.density_grid.features(g.density_planes, g.density_lines, x)
+        feats = self.density_grid.features(*self.filtered.lookup_factors("density"), x)
         raw = torch.stack([f.sum(dim=-1) for f in feats]).sum(dim=0)
         if self.config.density_activation == "softplus":
             return F.softplus(raw + self.config.density_shift)
@@ -120,7 +151,9 @@ class FourierTensoRFField(nn.Module):
 
     def rgb(self, xyz: Tensor, directions: Tensor | None) -> Tensor:
         """Colour in [0, 1] at world points [N, 3] (directions unit [N, 3], used only when view-dependent)."""
-        g = self.filtered
         x = self.normalize(xyz)
-        feats = self.appearance_grid.features(g.appearance_planes, g.appearance_lines, x)
-        return self.decoder(self.basis(torch.cat(feats, dim=-1)), directions)
+        feats = torch.cat(self.appearance_grid.features(*self.filtered.lookup_factors("appearance"), x), dim=-1)
+        if not use_bfloat16(self.config.decoder_precision, feats):
+            return self.decoder(self.basis(feats), directions)
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            return self.decoder(self.basis(feats), directions).float()

@@ -457,5 +457,5 @@ class FourieRFModelConfig(InstantiateConfig):
     """Rays per chunk when rendering whole images (small chunks keep the temporaries in the recycled heap)."""
     eval_stop_transmittance: float = 1e-4
     """Evaluation renders stop querying a ray once its transmittance is below this (0 = march every sample)."""
-    eval_segment_samples: int = 32
+    eval_segment_samples: int = 128
     """Samples per ray marched between early-termination checks at evaluation."""

@@ -55,6 +55,12 @@ def main() -> None:
 
     if args.threads:
         torch.set_num_threads(args.threads)
+    try:  # what the console scripts of this checkout do at start-up (older checkouts have no allocator tuning)
+        from fourierf_plugin.utils.allocator import keep_freed_memory
+
+        keep_freed_memory()
+    except ImportError:
+        pass
     config = load_config(_config_for(args.run_dir / "config.json", TrainerConfig), TrainerConfig)
     pipeline = config.pipeline.setup(
         device=torch.device("cpu"), max_iters=config.max_num_iterations, generator=seed_everything(config.seed)

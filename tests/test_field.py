@@ -239,8 +239,10 @@ def test_bfloat16_decoder_matches_float32_to_its_precision_with_finite_gradients
     assert grads and all(bool(torch.isfinite(g).all()) for g in grads)
 
 
-def test_auto_precision_follows_the_cpu_and_never_downcasts_float64() -> None:
+def test_auto_precision_is_for_renders_on_bf16_cpus_and_never_downcasts_float64() -> None:
     f32 = torch.zeros(2, 3)
-    assert use_bfloat16("auto", f32) == bool(torch.cpu._is_avx512_bf16_supported())
+    assert not use_bfloat16("auto", f32), "training (gradients on) stays float32 under auto"
+    with torch.no_grad():
+        assert use_bfloat16("auto", f32) == bool(torch.cpu._is_avx512_bf16_supported())
     assert use_bfloat16("bfloat16", f32) and not use_bfloat16("float32", f32)
     assert not use_bfloat16("bfloat16", f32.double())

@@ -67,8 +67,9 @@ class FieldConfig:
     density_activation: Literal["softplus", "relu"] = "softplus"
     """Density activation; TensoRF uses softplus for synthetic and ReLU for LLFF scenes."""
     decoder_precision: Literal["auto", "float32", "bfloat16"] = "auto"
-    """Arithmetic of the appearance basis and decoder (the grids always stay float32). auto: bfloat16 on a CPU with
-    native bf16 matmuls (2.7x faster there; colour error ~1e-3, far below few-shot error), float32 elsewhere."""
+    """Arithmetic of the appearance basis and decoder (the grids always stay float32). auto: bfloat16 for renders
+    (no gradients) on a CPU with native bf16 matmuls (the MLP is 2.7x faster there; colour error ~1e-3), float32
+    otherwise. bfloat16 also in training is opt-in: on P-CPU it was no faster per run and peaked at 4.2 GB RSS."""
     n_voxels_init: int = 128**3
     """Voxel budget at the start (per-axis resolution follows the box's aspect ratio)."""
     n_voxels_final: int = 300**3
@@ -81,7 +82,9 @@ def use_bfloat16(precision: str, features: Tensor) -> bool:
     """Whether the decoder runs in bfloat16 for these (float32, CPU) features; float64 models are never downcast."""
     if precision == "float32" or features.dtype != torch.float32 or features.device.type != "cpu":
         return False
-    return precision == "bfloat16" or bool(torch.cpu._is_avx512_bf16_supported())
+    if precision == "bfloat16":
+        return True
+    return not torch.is_grad_enabled() and bool(torch.cpu._is_avx512_bf16_supported())
 
 
 class FourierTensoRFField(nn.Module):

@@ -60,23 +60,38 @@ def train_and_eval(
     train_s, train_rss, code = run_timed(train_cmd, work / f"{run.key}.train.log")
     if code != 0:
         raise RuntimeError(f"training failed ({code}); see {work / f'{run.key}.train.log'}")
-    eval_json = work / f"{run.key}.eval.json"
+    views = json.loads((run_dir / "views.json").read_text())
+    row = {
+        "key": run.key, "method": run.method, "iters": run.iters, "seed": run.seed, "views": run.views,
+        "train_view_ids": views["train_view_ids"], "train_seconds": train_s, "train_peak_rss_gb": train_rss,
+        "run_dir": str(run_dir),
+    }  # fmt: skip
+    return row | evaluate(run_dir, run.key, work, lpips)
+
+
+def evaluate(run_dir: Path, key: str, work: Path, lpips: Path) -> dict:
+    """Evaluate a trained run on its test split: metrics and timings for its result row."""
+    eval_json = work / f"{key}.eval.json"
     eval_cmd = [
         str(BIN / "fourierf-eval"), "--load-config", str(run_dir / "config.json"), "--output-path", str(eval_json),
         "--lpips-weights", str(lpips),
     ]  # fmt: skip
-    eval_s, _, code = run_timed(eval_cmd, work / f"{run.key}.eval.log")
+    eval_s, _, code = run_timed(eval_cmd, work / f"{key}.eval.log")
     if code != 0:
-        raise RuntimeError(f"evaluation failed ({code}); see {work / f'{run.key}.eval.log'}")
+        raise RuntimeError(f"evaluation failed ({code}); see {work / f'{key}.eval.log'}")
     report = json.loads(eval_json.read_text())
-    views = json.loads((run_dir / "views.json").read_text())
     return {
-        "key": run.key, "method": run.method, "iters": run.iters, "seed": run.seed, "views": run.views,
-        "train_view_ids": views["train_view_ids"], "test_views": report["num_views"],
-        "psnr": report["results"]["psnr"], "ssim": report["results"]["ssim"], "lpips": report["results"]["lpips"],
-        "train_seconds": train_s, "eval_seconds": eval_s, "train_peak_rss_gb": train_rss,
-        "eval_render_seconds": report["timings"]["render_seconds_total"], "run_dir": str(run_dir),
+        "test_views": report["num_views"], "psnr": report["results"]["psnr"], "ssim": report["results"]["ssim"],
+        "lpips": report["results"]["lpips"], "eval_seconds": eval_s,
+        "eval_render_seconds": report["timings"]["render_seconds_total"],
     }  # fmt: skip
+
+
+def save_results(path: Path, results: dict[str, dict]) -> None:
+    """Rewrite the results file atomically (after rows were updated in place)."""
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text("".join(json.dumps(row) + "\n" for row in results.values()))
+    tmp.replace(path)
 
 
 def run_plan(plan: Sequence[Run], results_path: Path, execute: Callable[[Run], dict]) -> dict[str, dict]:

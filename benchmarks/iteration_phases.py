@@ -22,14 +22,29 @@ from collections import defaultdict
 from pathlib import Path
 
 
-def _config_for(path: Path, trainer_config: type) -> Path:
-    """The run's config.json without top-level options this (older) checkout does not know (e.g. profile_phases)."""
+def _known_only(payload: dict, cls: type) -> dict:
+    """``payload`` without keys that dataclass ``cls`` (and the dataclasses nested in it) does not know."""
     import dataclasses
+    import typing
+
+    hints = typing.get_type_hints(cls)
+    out = {}
+    for key, value in payload.items():
+        if key.startswith("_"):
+            out[key] = value
+        elif key in hints:
+            nested = hints[key]
+            is_dataclass = isinstance(nested, type) and dataclasses.is_dataclass(nested)
+            out[key] = _known_only(value, nested) if is_dataclass and isinstance(value, dict) else value
+    return out
+
+
+def _config_for(path: Path, trainer_config: type) -> Path:
+    """The run's config.json without options this (older) checkout does not know (e.g. profile_phases)."""
     import tempfile
 
     payload = json.loads(path.read_text())
-    known = {f.name for f in dataclasses.fields(trainer_config)}
-    payload["config"] = {k: v for k, v in payload["config"].items() if k in known or k.startswith("_")}
+    payload["config"] = _known_only(payload["config"], trainer_config)
     out = Path(tempfile.mkdtemp()) / "config.json"
     out.write_text(json.dumps(payload))
     return out

@@ -163,6 +163,17 @@ def update_benchmarks_md(path: Path, begin: str, end: str, body: list[str]) -> s
     return section
 
 
+def section_head(title: str, command: str, settings: str | None = None) -> list[str]:
+    """The opening lines every BENCHMARKS.md section shares: title, machine and command, what was run."""
+    return [
+        f"## {title}",
+        "",
+        f"Machine: {machine_description()}. Command: `{command}`.",
+        *([settings] if settings else []),
+        "",
+    ]
+
+
 def machine_description() -> str:
     import torch
 

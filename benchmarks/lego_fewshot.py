@@ -18,9 +18,9 @@ from common import (
     REPO,
     Run,
     load_results,
-    machine_description,
     results_table,
     run_plan,
+    section_head,
     train_and_eval,
     update_benchmarks_md,
 )
@@ -62,14 +62,12 @@ def main() -> None:
         plan = [r for r in plan if r.key in done]
     results = run_plan(plan, args.work / "results.jsonl", execute)
     body = [
-        "## Few-shot lego (4 views, 100×100, CPU)",
-        "",
-        f"Machine: {machine_description()}. Command: `python benchmarks/lego_fewshot.py"
-        + (" --quick" if args.quick else "")
-        + "`.",
-        "Settings: batch 1024 rays, grid 64³ → 128³, 25 test views (`--test-every 8`), LPIPS-alex v0.1. "
-        "Mean ± population std over seeds where several were run; time is process wall time of training alone.",
-        "",
+        *section_head(
+            "Few-shot lego (4 views, 100×100, CPU)",
+            "python benchmarks/lego_fewshot.py" + (" --quick" if args.quick else ""),
+            "Settings: batch 1024 rays, grid 64³ → 128³, 25 test views (`--test-every 8`), LPIPS-alex v0.1. "
+            "Mean ± population std over seeds where several were run; time is process wall time of training alone.",
+        ),
         *results_table(results, "reference"),
     ]
     print(update_benchmarks_md(args.markdown, BEGIN, END, body))

@@ -21,11 +21,11 @@ from common import (
     Run,
     evaluate,
     load_results,
-    machine_description,
     results_table,
     run_plan,
     run_timed,
     save_results,
+    section_head,
     train_and_eval,
     update_benchmarks_md,
 )
@@ -74,12 +74,12 @@ def main() -> None:
     if code != 0:
         spiral = f"spiral render failed (exit {code}); see {args.work / 'spiral.log'}"
     body = [
-        "## Few-shot fern (LLFF, 3 views, 504×378, NDC, CPU)",
-        "",
-        f"Machine: {machine_description()}. Command: `python benchmarks/llff_fewshot.py`.",
-        "Settings: RegNeRF views, hold-out test views 0/8/16 on full images, batch 1024 rays, grid 64³ → 128³, "
-        "real-scene preset (picked automatically), LPIPS-alex v0.1; time is process wall time of training alone.",
-        "",
+        *section_head(
+            "Few-shot fern (LLFF, 3 views, 504×378, NDC, CPU)",
+            "python benchmarks/llff_fewshot.py",
+            "Settings: RegNeRF views, hold-out test views 0/8/16 on full images, batch 1024 rays, grid 64³ → 128³, "
+            "real-scene preset (picked automatically), LPIPS-alex v0.1; time is process wall time of training alone.",
+        ),
         *results_table(results, "regnerf-3"),
         "",
         "Rendering the 3 hold-out views at 504×378 (fourierf-eval, render time alone): "

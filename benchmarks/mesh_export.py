@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 import trimesh
-from common import BIN, REPO, Run, load_results, machine_description, run_plan, run_timed, update_benchmarks_md
+from common import BIN, REPO, Run, load_results, run_plan, run_timed, section_head, update_benchmarks_md
 
 from fourierf_plugin.data.synthetic import default_scene, load_scene, sample_surface, write_blender_dataset
 from fourierf_plugin.engine.loading import load_run
@@ -110,10 +110,7 @@ def main() -> None:
     args = ap.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
     body = [
-        "## Mesh export (CPU)",
-        "",
-        f"Machine: {machine_description()}. Command: `python benchmarks/mesh_export.py`.",
-        "",
+        *section_head("Mesh export (CPU)", "python benchmarks/mesh_export.py"),
         *lego_rows(args.work, args.lego_results),
         *chamfer_rows(args.work, args.iters, args.seed),
     ]

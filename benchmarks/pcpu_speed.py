@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from common import REPO, Run, load_results, machine_description, run_plan, train_and_eval, update_benchmarks_md
+from common import REPO, Run, load_results, run_plan, section_head, train_and_eval, update_benchmarks_md
 
 from fourierf_plugin.bench import phases as ph
 
@@ -144,13 +144,13 @@ def main() -> None:
             f"| **total s/it** | {before['seconds_per_iteration']:.3f} | {after['seconds_per_iteration']:.3f} |",
         ]
     body = [
-        "## Speed, protocol P-CPU (lego 4 views, 100×100, CPU)",
-        "",
-        f"Machine: {machine_description()}. Command: `python benchmarks/pcpu_speed.py`. Median over "
-        f"{len(args.seeds)} seeds; train s is process wall time of `fourierf-train` (start-up included); final "
-        "phase = iterations 601–800 (after the last upsample at 560); filtering share = (filter forward + its "
-        "backward) / all timed phases over the whole run.",
-        "",
+        *section_head(
+            "Speed, protocol P-CPU (lego 4 views, 100×100, CPU)",
+            "python benchmarks/pcpu_speed.py",
+            f"Median over {len(args.seeds)} seeds; train s is process wall time of `fourierf-train` (start-up "
+            "included); final phase = iterations 601–800 (after the last upsample at 560); filtering share = (filter "
+            "forward + its backward) / all timed phases over the whole run.",
+        ),
         *lines,
     ]
     print(update_benchmarks_md(args.markdown, BEGIN, END, body))

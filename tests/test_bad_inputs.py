@@ -252,6 +252,12 @@ CASES: dict[str, Case] = {
         "train", train_with(f"{MODEL}.field.density-components", "0", "0", "0"), ("density-components 0 0 0",)
     ),
     "train: zero threads": Case("train", train_with("--threads", "0"), ("--threads 0",)),
+    "train: eval stop transmittance above 0.5": Case(
+        "train", train_with(f"{MODEL}.eval-stop-transmittance", "1"), ("eval-stop-transmittance 1", "[0, 0.5]")
+    ),
+    "train: zero eval segment": Case(
+        "train", train_with(f"{MODEL}.eval-segment-samples", "0"), ("eval-segment-samples 0", ">= 1")
+    ),
     "train: AdamW beta >= 1": Case("train", train_with("--optimizer.betas", "1.5", "0.9"), ("--optimizer.betas 1.5",)),
     # -- train: resuming ---------------------------------------------------------------------------------------------
     "train: resume a config from another version": Case(

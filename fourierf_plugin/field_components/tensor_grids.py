@@ -76,15 +76,18 @@ def _dtype(factor: Factor) -> torch.dtype:
 
 
 def _gather_lookup(table: Factor, columns: Tensor, weights: Tensor) -> Tensor:
-    """Interpolate a [C, M] table (or its row-major copy) at [N, K] corner columns with [N, K] weights -> [N, C]."""
-    rows = table.rows if isinstance(table, RowTable) else table.reshape(table.shape[0], -1).T.contiguous()
+    """Interpolate a factor (or its row-major copy) at [N, K] corner columns with [N, K] weights -> [N, C]."""
+    rows = (table if isinstance(table, RowTable) else row_table(table)).rows
     return _GatherLookup.apply(rows, columns, weights)
 
 
-def _use_gather(table: Factor, *coords: Tensor) -> bool:
-    """The gather path on CPU; ``grid_sample`` elsewhere, or when gradients w.r.t. the points are wanted."""
+def _use_gather(table: Factor, coords: tuple[Tensor, ...], gather: bool | None) -> bool:
+    """Row tables always gather; otherwise ``gather`` decides, else the gather path on CPU and ``grid_sample``
+    elsewhere or when gradients w.r.t. the points are wanted."""
     if isinstance(table, RowTable):
         return True
+    if gather is not None:
+        return gather
     return table.device.type == "cpu" and not any(c.requires_grad for c in coords)
 
 
@@ -94,7 +97,7 @@ def interp_plane(plane: Factor, u: Tensor, v: Tensor, gather: bool | None = None
     Returns stored values exactly at grid vertices. On CPU four row gathers (fast backward); elsewhere
     ``grid_sample`` (``gather`` forces either; both give the same values).
     """
-    if not isinstance(plane, RowTable) and not (_use_gather(plane, u, v) if gather is None else gather):
+    if not _use_gather(plane, (u, v), gather):
         grid = torch.stack([u, v], dim=-1).view(1, -1, 1, 2)
         out = F.grid_sample(plane.unsqueeze(0), grid, mode="bilinear", align_corners=True, padding_mode="border")
         return out.view(plane.shape[0], -1).T
@@ -109,7 +112,7 @@ def interp_plane(plane: Factor, u: Tensor, v: Tensor, gather: bool | None = None
 
 def interp_lines(line: Factor, coord: Tensor, gather: bool | None = None) -> Tensor:
     """Linear interpolation of a [C, L] line at normalised coords in [-1, 1] (align_corners=True), -> [N, C]."""
-    if not isinstance(line, RowTable) and not (_use_gather(line, coord) if gather is None else gather):
+    if not _use_gather(line, (coord,), gather):
         return interp_plane(line.unsqueeze(-1), torch.zeros_like(coord), coord, gather=False)
     x0, x1, fx = _axis_corners(coord, line.shape[1])
     weights = torch.stack([1.0 - fx, fx], dim=1).to(_dtype(line))

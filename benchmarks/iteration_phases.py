@@ -3,8 +3,9 @@
 The phases are measured from outside, by wrapping the pipeline's public pieces, so the same harness runs on code
 that has no phase markers of its own (an older commit passed as ``--code-dir``):
 
-    data (next_batch) · fourier_filter (model.prepare) · density (field.density) · appearance (field.rgb) ·
-    sampling+compositing (the rest of the model's forward) · losses · backward (incl. the filter's backward) · optimizer
+    data (next_batch) · prepare (model.prepare: Fourier filtering + dense tables) · density (field.density) ·
+    appearance (field.rgb) · sampling+compositing (the rest of the model's forward) · losses ·
+    backward (incl. the filter's backward) · optimizer
 
     python benchmarks/iteration_phases.py RUN_DIR --step 700 --iters 20 [--code-dir OLD_CHECKOUT] --out phases.json
 
@@ -98,7 +99,7 @@ def main() -> None:
         return wrapper
 
     pipeline.datamanager.next_batch = timed("data", pipeline.datamanager.next_batch)
-    model.prepare = timed("fourier_filter", model.prepare)
+    model.prepare = timed("prepare", model.prepare)
     field.density = timed("density", field.density)
     field.rgb = timed("appearance", field.rgb)
     model.loss_dict = timed("losses", model.loss_dict)

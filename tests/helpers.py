@@ -13,8 +13,10 @@ from pathlib import Path
 import pytest
 import torch
 
+from fourierf_plugin.data.dataparser_base import SceneDeclaration
 from fourierf_plugin.data.parsers.llff import LLFF_DECLARATION, NDC_BOX
 from fourierf_plugin.engine.trainer import Trainer, TrainerConfig
+from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig
 from fourierf_plugin.models.fourierf import FourieRFModel, FourieRFModelConfig
 from fourierf_plugin.scripts.train import parse_args
 
@@ -100,3 +102,37 @@ def ndc_model(config: FourieRFModelConfig, max_iters: int = 100) -> FourieRFMode
         max_iters=max_iters,
         generator=torch.Generator().manual_seed(0),
     )
+
+
+BLENDER = SceneDeclaration(
+    background="white", ray_space="euclidean", bounded=True, view_dependent=False, occlusion_regularization=False
+)
+
+
+def slab_model(slab_density: float, **config) -> FourieRFModel:
+    """A 16³ ReLU field with σ = ``slab_density`` for z in the middle third of the box, 0 elsewhere."""
+    field = FieldConfig(
+        n_voxels_init=16**3, density_components=(2, 2, 2), appearance_components=(3, 3, 3), appearance_dim=6,
+        hidden_dim=16, density_activation="relu",
+    )  # fmt: skip
+    torch.manual_seed(0)  # the decoder's layers draw from the global generator
+    model = FourieRFModelConfig(field=field, **config).setup(
+        scene_box=torch.tensor([[-1.5] * 3, [1.5] * 3]), near=0.5, far=6.0, declaration=BLENDER, max_iters=10,
+        generator=torch.Generator().manual_seed(0),
+    )  # fmt: skip
+    grid = model.field.density_grid
+    with torch.no_grad():
+        for p in [*grid.planes, *grid.lines]:
+            p.zero_()
+        grid.planes[0][0].fill_(1.0)  # the xy plane times the z line
+        z = grid.lines[0].shape[1]
+        grid.lines[0][0, z // 3 : 2 * z // 3] = slab_density
+    model.field.invalidate()
+    return model
+
+
+def rays_through_the_slab(n: int = 64) -> tuple[torch.Tensor, torch.Tensor]:
+    g = torch.Generator().manual_seed(1)
+    origins = torch.cat([torch.rand(n, 2, generator=g) - 0.5, torch.full((n, 1), -3.0)], dim=-1)
+    directions = torch.cat([(torch.rand(n, 2, generator=g) - 0.5) * 0.2, torch.ones(n, 1)], dim=-1)
+    return origins, directions / directions.norm(dim=-1, keepdim=True)

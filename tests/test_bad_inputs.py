@@ -258,6 +258,12 @@ CASES: dict[str, Case] = {
     "train: zero eval segment": Case(
         "train", train_with(f"{MODEL}.eval-segment-samples", "0"), ("eval-segment-samples 0", ">= 1")
     ),
+    "train: zero checkpoint chunk": Case(
+        "train", train_with(f"{MODEL}.checkpoint-chunk", "0"), ("checkpoint-chunk 0", ">= 1")
+    ),
+    "train: negative dense render budget": Case(
+        "train", train_with(f"{MODEL}.field.dense-render-max-mb", "-1"), ("dense-render-max-mb -1", ">= 0")
+    ),
     "train: AdamW beta >= 1": Case("train", train_with("--optimizer.betas", "1.5", "0.9"), ("--optimizer.betas 1.5",)),
     # -- train: resuming ---------------------------------------------------------------------------------------------
     "train: resume a config from another version": Case(

@@ -246,3 +246,83 @@ def test_auto_precision_is_for_renders_on_bf16_cpus_and_never_downcasts_float64(
         assert use_bfloat16("auto", f32) == bool(torch.cpu._is_avx512_bf16_supported())
     assert use_bfloat16("bfloat16", f32) and not use_bfloat16("float32", f32)
     assert not use_bfloat16("bfloat16", f32.double())
+
+
+# ------------------------------------------------------------------------------------------------ dense tables
+def _outputs(field: FourierTensoRFField, xyz: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    field.prepare(0.6, 0.8)
+    return field.density(xyz), field.rgb(xyz, None)
+
+
+def _baked(field: FourierTensoRFField) -> set[str]:
+    return {kind for kind, table in field.filtered.dense.items() if table is not None}
+
+
+def test_dense_tables_follow_the_budgets_and_read_the_same_field() -> None:
+    """Training bakes only the density (differentiably) up to a vertex count; renders bake both tables within a MB
+    budget; every combination gives the factored lookup's density and colour."""
+    xyz = _points(200)
+    torch.manual_seed(0)
+    factored = _field(decoder_precision="float32", dense_train_max_vertices=0, dense_render_max_mb=0)
+    with torch.no_grad():
+        reference = _outputs(factored, xyz)
+    assert factored.filtered.dense == {"density": None, "appearance": None}
+    for train_max, render_mb, train_kinds, render_kinds in [
+        (10**6, 1.0, {"density"}, {"density", "appearance"}),
+        (10, 315 * 4 / 2**20, set(), {"density"}),  # 315 vertices: the density fits, 6 appearance channels do not
+    ]:
+        torch.manual_seed(0)
+        field = _field(decoder_precision="float32", dense_train_max_vertices=train_max, dense_render_max_mb=render_mb)
+        density, rgb = _outputs(field, xyz)
+        assert _baked(field) == train_kinds
+        torch.testing.assert_close(density.detach(), reference[0], atol=1e-5, rtol=1e-5)
+        torch.testing.assert_close(rgb.detach(), reference[1], atol=1e-6, rtol=1e-5)
+        with torch.no_grad():
+            density, rgb = _outputs(field, xyz)
+        assert _baked(field) == render_kinds
+        torch.testing.assert_close(density, reference[0], atol=1e-5, rtol=1e-5)
+        torch.testing.assert_close(rgb, reference[1], atol=1e-6, rtol=1e-5)
+
+
+def test_dense_density_in_training_gives_finite_gradients_to_every_factor() -> None:
+    field = _field(dense_train_max_vertices=10**6)
+    field.prepare(0.4, 0.4)
+    field.density(_points(64)).sum().backward()
+    assert _baked(field) == {"density"}
+    for p in field.density_grid.parameters():
+        assert p.grad is not None and torch.isfinite(p.grad).all()
+        assert float(p.grad.abs().sum()) > 0
+
+
+def test_renders_reuse_the_tables_until_a_parameter_or_cutoff_changes() -> None:
+    field = _field()
+    with torch.no_grad():
+        field.prepare(0.5, 0.5)
+        first = field.filtered
+        field.prepare(0.5, 0.5)
+        assert field.filtered is first  # the next view of the same render: nothing rebuilt
+        field.prepare(0.6, 0.5)
+        assert field.filtered is not first
+        second = field.filtered
+        field.density_grid.planes[0].add_(0.1)  # an optimiser step changes parameters in place
+        field.prepare(0.6, 0.5)
+        assert field.filtered is not second
+        third = field.filtered
+        field.invalidate()
+        field.prepare(0.6, 0.5)
+        assert field.filtered is not third
+    field.prepare(0.6, 0.5)  # training always filters afresh, with a graph
+    assert field.filtered is not third and field.filtered.density_planes[0].requires_grad
+
+
+def test_tables_are_built_at_the_first_lookup_of_their_kind_only() -> None:
+    """A prepare that only reads the factors (an upsample) or only the density (an occupancy update) bakes no
+    appearance table: the biggest one."""
+    field = _field()
+    with torch.no_grad():
+        field.prepare(0.5, 0.5)
+        assert field.filtered.dense == {}
+        field.density(_points(8))
+        assert _baked(field) == {"density"}
+        field.rgb(_points(8), None)
+        assert _baked(field) == {"density", "appearance"}

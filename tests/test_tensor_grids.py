@@ -16,6 +16,7 @@ from fourierf_plugin.field_components.tensor_grids import (
     TensorVM,
     interp_lines,
     interp_plane,
+    interp_volume,
     row_table,
 )
 
@@ -353,17 +354,79 @@ def test_row_tables_are_built_only_for_evaluation() -> None:
     from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig, FourierTensoRFField
 
     field = FourierTensoRFField(
-        FieldConfig(density_components=(2, 2, 2), appearance_components=(2, 2, 2)),
+        FieldConfig(density_components=(2, 2, 2), appearance_components=(2, 2, 2), dense_render_max_mb=0),
         torch.tensor([[-1.0] * 3, [1.0] * 3]), [5, 6, 7], False, torch.Generator().manual_seed(0),
     )  # fmt: skip
     field.prepare(0.5, 0.5)
-    assert field.filtered.lookup is None  # training: lookups differentiate through the filtered tensors
+    assert not any(isinstance(t, RowTable) for t in field.filtered.lookup_factors("density")[0])  # training
     with torch.no_grad():
         field.prepare(0.5, 0.5)
-    assert field.filtered.lookup is not None
+    assert field.filtered.row_tables == {}  # made at the first lookup, not before
     assert all(isinstance(t, RowTable) for t in field.filtered.lookup_factors("density")[0])
+    assert set(field.filtered.row_tables) == {"density"}
     xyz = torch.rand(50, 3) * 2 - 1
     with torch.no_grad():
         evaluated = field.density(xyz)
     field.prepare(0.5, 0.5)
     torch.testing.assert_close(field.density(xyz).detach(), evaluated)
+
+
+# --------------------------------------------------------------------------------------------- dense vertex tables
+def _grid64(cls: type, reso: list[int]) -> TensorVM | TensorCP:
+    comps = (3, 4, 2) if cls is TensorVM else (4, 4, 4)
+    return cls(reso, comps, 0.7, torch.Generator().manual_seed(4)).double()
+
+
+@pytest.mark.parametrize("cls", [TensorVM, TensorCP])
+@pytest.mark.parametrize("reso", [[5, 6, 7], [2, 9, 3], [1, 4, 6]])
+def test_dense_table_lookup_is_the_factored_lookup(cls: type, reso: list[int]) -> None:
+    """Bilinear plane x linear line = trilinear on the vertex products: the baked table reads the same field,
+    inside the box and clamped outside, summed (density) or projected (the appearance basis)."""
+    grid = _grid64(cls, reso)
+    planes, lines = list(grid.planes), list(grid.lines)
+    xyz = torch.rand(400, 3, generator=torch.Generator().manual_seed(2), dtype=torch.float64) * 2.6 - 1.3
+    feats = torch.cat(grid.features(planes, lines, xyz), dim=-1)
+    weight = torch.randn(5, feats.shape[1], generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    summed = interp_volume(grid.dense(planes, lines), reso, xyz)
+    projected = interp_volume(grid.dense(planes, lines, weight), reso, xyz)
+    assert summed.shape == (400, 1) and projected.shape == (400, 5)
+    torch.testing.assert_close(summed, feats.sum(dim=-1, keepdim=True), atol=1e-12, rtol=0)
+    torch.testing.assert_close(projected, feats @ weight.T, atol=1e-12, rtol=0)
+
+
+@pytest.mark.parametrize("cls", [TensorVM, TensorCP])
+def test_dense_table_rows_are_the_vertex_values_read_back_exactly(cls: type) -> None:
+    reso = [4, 5, 3]
+    grid = _grid64(cls, reso)
+    planes, lines = list(grid.planes), list(grid.lines)
+    table = grid.dense(planes, lines)
+    idx = torch.stack(torch.meshgrid(*[torch.arange(r) for r in reso], indexing="ij"), dim=-1).reshape(-1, 3)
+    xyz = idx.double() / (torch.tensor(reso, dtype=torch.float64) - 1) * 2 - 1
+    rows = (idx[:, 2] * reso[1] + idx[:, 1]) * reso[0] + idx[:, 0]  # axis 0 fastest
+    assert torch.equal(interp_volume(table, reso, xyz), table[rows])
+    direct = torch.cat(grid.features(planes, lines, xyz), dim=-1).sum(dim=-1, keepdim=True)
+    torch.testing.assert_close(table[rows], direct, atol=1e-12, rtol=0)
+
+
+@pytest.mark.parametrize("cls", [TensorVM, TensorCP])
+@pytest.mark.parametrize("channels", [1, 3])
+def test_dense_table_gradients_reach_the_factors_as_the_factored_lookup_does(cls: type, channels: int) -> None:
+    reso = [6, 5, 4]
+    xyz = torch.rand(300, 3, generator=torch.Generator().manual_seed(5), dtype=torch.float64) * 2.2 - 1.1
+    grads = []
+    for dense in (True, False):
+        grid = _grid64(cls, reso)
+        planes, lines = list(grid.planes), list(grid.lines)
+        width = sum(p.shape[0] for p in planes) if planes else lines[0].shape[0]
+        weight = torch.linspace(-1, 1, channels * width, dtype=torch.float64).view(channels, width)
+        weight = weight if channels > 1 else None
+        if dense:
+            out = interp_volume(grid.dense(planes, lines, weight), reso, xyz)
+        else:
+            feats = torch.cat(grid.features(planes, lines, xyz), dim=-1)
+            out = feats.sum(dim=-1, keepdim=True) if weight is None else feats @ weight.T
+        (out * torch.arange(1, channels + 1, dtype=torch.float64)).sum().backward()
+        grads.append([p.grad for p in grid.parameters()])
+    for a, b in zip(*grads, strict=True):
+        assert torch.isfinite(a).all()
+        torch.testing.assert_close(a, b, atol=1e-10, rtol=0)

@@ -91,6 +91,25 @@ def _use_gather(table: Factor, coords: tuple[Tensor, ...], gather: bool | None) 
     return table.device.type == "cpu" and not any(c.requires_grad for c in coords)
 
 
+def interp_volume(table: Tensor, reso: Sequence[int], xyz: Tensor) -> Tensor:
+    """Trilinear lookup of a dense vertex table [R2·R1·R0, D] (axis 0 fastest, as ``TensorGrid.dense`` lays it out)
+    at normalised points [N, 3] in [-1, 1]³ (align_corners=True, border-clamped), -> [N, D].
+
+    A VM or CP grid is exactly this lookup of its ``dense`` table: the plane's bilinear and the line's linear weights
+    multiply into the trilinear ones, and every axis uses the same vertices for planes and lines.
+    """
+    corners = [_axis_corners(xyz[:, a], reso[a]) for a in range(3)]
+    stride = (1, reso[0], reso[0] * reso[1])
+    index = [torch.stack([lo, hi], dim=1) * s for (lo, hi, _), s in zip(corners, stride, strict=True)]
+    weight = [torch.stack([1.0 - f, f], dim=1).to(table.dtype) for _, _, f in corners]
+    columns = (index[2][:, :, None, None] + index[1][:, None, :, None] + index[0][:, None, None, :]).view(-1, 8)
+    weights = (weight[2][:, :, None, None] * weight[1][:, None, :, None] * weight[0][:, None, None, :]).view(-1, 8)
+    if table.shape[1] == 1:  # one channel: a single flat gather (its autograd backward is one index_add)
+        values = table.view(-1).index_select(0, columns.view(-1)).view(-1, 8)
+        return (values * weights).sum(dim=1, keepdim=True)
+    return _GatherLookup.apply(table, columns, weights)
+
+
 def interp_plane(plane: Factor, u: Tensor, v: Tensor, gather: bool | None = None) -> Tensor:
     """Bilinear lookup of a [C, H, W] plane at normalised (u→W, v→H) in [-1, 1] (align_corners=True), -> [N, C].
 
@@ -145,6 +164,14 @@ class TensorGrid(nn.Module):
         """Per-component features [N, C_i] for each factor group, from the given (filtered) tensors."""
         raise NotImplementedError
 
+    def dense(self, planes: Sequence[Tensor], lines: Sequence[Tensor], weight: Tensor | None = None) -> Tensor:
+        """Every vertex's features projected by ``weight`` [D, ΣC] (None: summed, D = 1) -> [R2·R1·R0, D].
+
+        ``interp_volume`` of this table is ``features`` followed by the projection, up to rounding: one gather of
+        D values per corner instead of one per component, for grids looked up many times.
+        """
+        raise NotImplementedError
+
     # -- resizing (applied to raw parameters) -----------------------------------------------------------------
     @torch.no_grad()
     def replace(self, planes: Sequence[Tensor], lines: Sequence[Tensor]) -> None:
@@ -194,6 +221,23 @@ class TensorVM(TensorGrid):
             for p, line, (m0, m1), v in zip(planes, lines, MAT_MODES, VEC_MODES, strict=True)
         ]
 
+    def dense(self, planes: Sequence[Tensor], lines: Sequence[Tensor], weight: Tensor | None = None) -> Tensor:
+        reso = self.resolution
+        total: Tensor | None = None
+        offset = 0
+        for p, line, (m0, m1), v in zip(planes, lines, MAT_MODES, VEC_MODES, strict=True):
+            c = p.shape[0]
+            w = _projection(weight, offset, c, p)
+            offset += c
+            # [R_m1·R_m0, C] @ [C, R_v·D]: the plane-line outer products, already summed over components.
+            part = p.reshape(c, -1).T @ (line.unsqueeze(-1) * w.T.unsqueeze(1)).reshape(c, -1)
+            part = part.view(reso[m1], reso[m0], reso[v], -1)
+            order = (m1, m0, v)
+            part = part.permute(order.index(2), order.index(1), order.index(0), 3)
+            total = _accumulate(total, part)
+        assert total is not None
+        return total.reshape(-1, total.shape[-1])
+
 
 class TensorCP(TensorGrid):
     """CP: component c is ``L_x[c](x) · L_y[c](y) · L_z[c](z)``; there are no planes."""
@@ -214,3 +258,26 @@ class TensorCP(TensorGrid):
         for axis in (1, 2):
             out = out * interp_lines(lines[axis], xyz[:, axis])
         return [out]
+
+    def dense(self, planes: Sequence[Tensor], lines: Sequence[Tensor], weight: Tensor | None = None) -> Tensor:
+        c = lines[0].shape[0]
+        w = _projection(weight, 0, c, lines[0])
+        zy = (lines[2].unsqueeze(2) * lines[1].unsqueeze(1)).reshape(c, -1)  # [C, R2·R1]
+        out = zy.T @ (lines[0].unsqueeze(-1) * w.T.unsqueeze(1)).reshape(c, -1)  # [R2·R1, R0·D]
+        return out.reshape(-1, w.shape[0])
+
+
+def _projection(weight: Tensor | None, offset: int, count: int, like: Tensor) -> Tensor:
+    """Columns [offset, offset + count) of the projection [D, ΣC], or a row of ones (a plain sum)."""
+    if weight is None:
+        return like.new_ones(1, count)
+    return weight[:, offset : offset + count].to(like.dtype)
+
+
+def _accumulate(total: Tensor | None, part: Tensor) -> Tensor:
+    """total + part; in place without autograd, so a large table is not copied once per group."""
+    if total is None:
+        return part.contiguous()
+    if torch.is_grad_enabled() and (total.requires_grad or part.requires_grad):
+        return total + part
+    return total.add_(part)

@@ -8,6 +8,7 @@ old shape can never be read.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -17,7 +18,15 @@ from torch import Tensor, nn
 
 from fourierf_plugin.field_components.decoder import AppearanceDecoder
 from fourierf_plugin.field_components.fourier import filter_lines, filter_planes
-from fourierf_plugin.field_components.tensor_grids import Factor, TensorCP, TensorGrid, TensorVM, row_table
+from fourierf_plugin.field_components.tensor_grids import (
+    Factor,
+    TensorCP,
+    TensorGrid,
+    TensorVM,
+    interp_volume,
+    row_table,
+)
+from fourierf_plugin.utils.phases import phase
 
 
 @dataclass
@@ -26,24 +35,23 @@ class FilteredGrids:
     density_lines: list[Tensor]
     appearance_planes: list[Tensor]
     appearance_lines: list[Tensor]
-    lookup: dict[str, tuple[list[Factor], list[Factor]]] | None = None
-    """Row-major copies for the lookups of an evaluation on CPU (built once per ``prepare``, see ``RowTable``)."""
+    rendering: bool = False
+    """Prepared without gradients for many lookups of fixed grids: they may read render-only structures."""
+    dense: dict[str, Tensor | None] = dataclasses.field(default_factory=dict)
+    """Per kind, the vertex table ``interp_volume`` reads instead of the factors (density: the summed feature;
+    appearance: the basis output; see ``TensorGrid.dense``), or None where the field's budget says no. Built by the
+    field at the kind's first lookup, so a ``prepare`` that only reads the factors (an upsample) pays nothing."""
+    row_tables: dict[str, tuple[list[Factor], list[Factor]]] = dataclasses.field(default_factory=dict)
+    """Per kind, row-major copies of the factors (``RowTable``) for renders on CPU, made at the first lookup."""
 
     def lookup_factors(self, kind: str) -> tuple[list[Factor], list[Factor]]:
         """The factors the ``kind`` ("density" or "appearance") lookups read."""
-        if self.lookup is not None:
-            return self.lookup[kind]
-        return getattr(self, f"{kind}_planes"), getattr(self, f"{kind}_lines")
-
-    def with_row_tables(self) -> FilteredGrids:
-        tables = {
-            kind: (
-                [row_table(p) for p in getattr(self, f"{kind}_planes")],
-                [row_table(x) for x in getattr(self, f"{kind}_lines")],
-            )
-            for kind in ("density", "appearance")
-        }
-        return dataclasses.replace(self, lookup=tables)
+        planes, lines = getattr(self, f"{kind}_planes"), getattr(self, f"{kind}_lines")
+        if not self.rendering or lines[0].device.type != "cpu":
+            return planes, lines
+        if kind not in self.row_tables:  # many lookups follow: transpose once instead of per call
+            self.row_tables[kind] = ([row_table(p) for p in planes], [row_table(x) for x in lines])
+        return self.row_tables[kind]
 
 
 @dataclass
@@ -76,6 +84,14 @@ class FieldConfig:
     """Voxel budget after the last upsample."""
     upsample_fractions: tuple[float, ...] = (0.3, 0.7)
     """When to upsample, as fractions of the run (log-spaced voxel counts)."""
+    dense_train_max_vertices: int = 1 << 22
+    """In training, up to this many grid vertices the density is read from a dense table (``TensorGrid.dense``,
+    rebuilt differentiably from the filtered factors at every ``prepare``): 8 values gathered per sample instead of
+    6 per component, and a much cheaper backward. Larger grids, where the table costs more than the lookups it
+    saves (P-CPU 128³: 0.246 -> 0.198 s/it; 256³: ~0.7 s per build), read the factors. 0 = never."""
+    dense_render_max_mb: float = 512.0
+    """Renders (no gradients) read density and appearance (the basis output) from dense tables, each baked when it
+    fits in this many MB (4 bytes per value): exact up to rounding, far fewer values gathered. 0 = never."""
 
 
 def use_bfloat16(precision: str, features: Tensor) -> bool:
@@ -102,6 +118,7 @@ class FourierTensoRFField(nn.Module):
         self.decoder = AppearanceDecoder(config.appearance_dim, config.hidden_dim, view_dependent)
         self.register_buffer("aabb", aabb.detach().clone().float())
         self._filtered: FilteredGrids | None = None
+        self._render_key: tuple | None = None
 
     # -- filtering --------------------------------------------------------------------------------------------
     def filtered_grids(
@@ -119,13 +136,45 @@ class FourierTensoRFField(nn.Module):
 
     def prepare(self, f_density: float, f_color: float, plane_leakage: float = 0.0, app_follow: bool = False) -> None:
         """Filter once for this iteration (or this evaluation) and cache the result for every lookup."""
+        rendering = not torch.is_grad_enabled()
+        key = (f_density, f_color, plane_leakage, app_follow, self._parameter_versions())
+        if rendering and self._filtered is not None and self._render_key == key:
+            return  # unchanged parameters and cutoffs (the views of one render): keep the tables already built
         filtered = self.filtered_grids(f_density, f_color, plane_leakage, app_follow)
-        if not torch.is_grad_enabled() and self.aabb.device.type == "cpu":
-            filtered = filtered.with_row_tables()  # many lookups of fixed grids follow: transpose them once
+        filtered.rendering = rendering
         self._filtered = filtered
+        self._render_key = key if rendering else None
+
+    def _dense_table(self, kind: str) -> Tensor | None:
+        """The kind's dense table for this ``prepare``, built at its first lookup (None: read the factors)."""
+        filtered = self.filtered
+        if kind not in filtered.dense:
+            with phase("dense_tables"):  # a lookup precomputation, not part of the filtering
+                filtered.dense[kind] = self._bake(kind, filtered)
+        return filtered.dense[kind]
+
+    def _bake(self, kind: str, filtered: FilteredGrids) -> Tensor | None:
+        """A dense table where the config's budgets allow it: density in training up to a vertex count, density and
+        appearance in renders up to a size in MB."""
+        vertices, cfg = math.prod(self.resolution), self.config
+        if kind == "density":
+            fits = (
+                vertices * 4 / 2**20 <= cfg.dense_render_max_mb
+                if filtered.rendering
+                else (vertices <= cfg.dense_train_max_vertices)
+            )
+            return self.density_grid.dense(filtered.density_planes, filtered.density_lines) if fits else None
+        if not (filtered.rendering and vertices * cfg.appearance_dim * 4 / 2**20 <= cfg.dense_render_max_mb):
+            return None
+        return self.appearance_grid.dense(filtered.appearance_planes, filtered.appearance_lines, self.basis.weight)
+
+    def _parameter_versions(self) -> tuple:
+        """Identity and in-place version of every parameter and buffer: any optimiser step or resize changes it."""
+        return tuple((id(t), t._version) for t in (*self.parameters(), *self.buffers()))
 
     def invalidate(self) -> None:
         self._filtered = None
+        self._render_key = None
 
     @property
     def filtered(self) -> FilteredGrids:
@@ -146,8 +195,12 @@ class FourierTensoRFField(nn.Module):
     def density(self, xyz: Tensor) -> Tensor:
         """Volume density σ ≥ 0 at world points [N, 3] -> [N]."""
         x = self.normalize(xyz)
-        feats = self.density_grid.features(*self.filtered.lookup_factors("density"), x)
-        raw = torch.stack([f.sum(dim=-1) for f in feats]).sum(dim=0)
+        table = self._dense_table("density")
+        if table is not None:
+            raw = interp_volume(table, self.resolution, x).squeeze(-1)
+        else:
+            feats = self.density_grid.features(*self.filtered.lookup_factors("density"), x)
+            raw = torch.stack([f.sum(dim=-1) for f in feats]).sum(dim=0)
         if self.config.density_activation == "softplus":
             return F.softplus(raw + self.config.density_shift)
         return F.relu(raw)  # TensoRF applies the shift to softplus only; relu(x - 10) would start dead
@@ -155,8 +208,15 @@ class FourierTensoRFField(nn.Module):
     def rgb(self, xyz: Tensor, directions: Tensor | None) -> Tensor:
         """Colour in [0, 1] at world points [N, 3] (directions unit [N, 3], used only when view-dependent)."""
         x = self.normalize(xyz)
+        table = self._dense_table("appearance")
+        if table is not None:
+            return self._decode(interp_volume(table, self.resolution, x), directions, projected=True)
         feats = torch.cat(self.appearance_grid.features(*self.filtered.lookup_factors("appearance"), x), dim=-1)
+        return self._decode(feats, directions, projected=False)
+
+    def _decode(self, feats: Tensor, directions: Tensor | None, projected: bool) -> Tensor:
+        """Basis (unless the dense table already applied it) and decoder, in bfloat16 where ``use_bfloat16`` says."""
         if not use_bfloat16(self.config.decoder_precision, feats):
-            return self.decoder(self.basis(feats), directions)
+            return self.decoder(feats if projected else self.basis(feats), directions)
         with torch.autocast("cpu", dtype=torch.bfloat16):
-            return self.decoder(self.basis(feats), directions).float()
+            return self.decoder(feats if projected else self.basis(feats), directions).float()

@@ -67,3 +67,21 @@ def test_training_marches_every_sample() -> None:
         model.render_rays(origins, directions, step=0)
     assert len(counts) > 2  # one query in training, several segments at evaluation
     assert counts[0] > sum(counts[1:])  # and training queried more samples than the early-stopped render
+
+
+def test_segments_skip_unoccupied_cells_like_the_full_march() -> None:
+    """With an occupancy grid the segments query only live samples in occupied cells, and render what the full
+    march (which checks every sample against the grid up front) renders."""
+    origins, directions = rays_through_the_slab()
+    models = [slab_model(0.05, eval_stop_transmittance=0.0), slab_model(0.05, eval_segment_samples=16)]
+    counts = []
+    for model in models:
+        with torch.no_grad():
+            model.prepare(10)
+            model._update_occupancy(shrink=False)
+        assert model.occupancy.active and not bool(model.occupancy.cells.all())
+        counts.append(count_density_queries(model))
+    full, early = (m.render_rays(origins, directions, step=10) for m in models)
+    for key in ("rgb", "accumulation", "depth"):
+        torch.testing.assert_close(early[key], full[key], atol=2e-4, rtol=0)
+    assert sum(counts[1]) == sum(counts[0])  # the slab is not opaque: the same occupied samples, in segments

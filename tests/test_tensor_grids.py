@@ -392,6 +392,9 @@ def test_dense_table_lookup_is_the_factored_lookup(cls: type, reso: list[int]) -
     assert summed.shape == (400, 1) and projected.shape == (400, 5)
     torch.testing.assert_close(summed, feats.sum(dim=-1, keepdim=True), atol=1e-12, rtol=0)
     torch.testing.assert_close(projected, feats @ weight.T, atol=1e-12, rtol=0)
+    with torch.no_grad():  # renders read one-channel tables through grid_sample instead of gathers
+        rendered = interp_volume(grid.dense(planes, lines), reso, xyz)
+    torch.testing.assert_close(rendered, summed.detach(), atol=1e-12, rtol=0)
 
 
 @pytest.mark.parametrize("cls", [TensorVM, TensorCP])
@@ -404,6 +407,8 @@ def test_dense_table_rows_are_the_vertex_values_read_back_exactly(cls: type) -> 
     xyz = idx.double() / (torch.tensor(reso, dtype=torch.float64) - 1) * 2 - 1
     rows = (idx[:, 2] * reso[1] + idx[:, 1]) * reso[0] + idx[:, 0]  # axis 0 fastest
     assert torch.equal(interp_volume(table, reso, xyz), table[rows])
+    with torch.no_grad():
+        torch.testing.assert_close(interp_volume(table, reso, xyz), table[rows], atol=1e-14, rtol=0)
     direct = torch.cat(grid.features(planes, lines, xyz), dim=-1).sum(dim=-1, keepdim=True)
     torch.testing.assert_close(table[rows], direct, atol=1e-12, rtol=0)
 

@@ -98,13 +98,17 @@ def interp_volume(table: Tensor, reso: Sequence[int], xyz: Tensor) -> Tensor:
     A VM or CP grid is exactly this lookup of its ``dense`` table: the plane's bilinear and the line's linear weights
     multiply into the trilinear ones, and every axis uses the same vertices for planes and lines.
     """
+    differentiable = torch.is_grad_enabled() and table.requires_grad
+    if table.shape[1] == 1 and not differentiable:  # grid_sample's fused 3-D kernel: ~3x faster than 8 gathers
+        volume, points = table.view(1, 1, reso[2], reso[1], reso[0]), xyz.view(1, -1, 1, 1, 3)
+        return F.grid_sample(volume, points, mode="bilinear", align_corners=True, padding_mode="border").view(-1, 1)
     corners = [_axis_corners(xyz[:, a], reso[a]) for a in range(3)]
     stride = (1, reso[0], reso[0] * reso[1])
     index = [torch.stack([lo, hi], dim=1) * s for (lo, hi, _), s in zip(corners, stride, strict=True)]
     weight = [torch.stack([1.0 - f, f], dim=1).to(table.dtype) for _, _, f in corners]
     columns = (index[2][:, :, None, None] + index[1][:, None, :, None] + index[0][:, None, None, :]).view(-1, 8)
     weights = (weight[2][:, :, None, None] * weight[1][:, None, :, None] * weight[0][:, None, None, :]).view(-1, 8)
-    if table.shape[1] == 1:  # one channel: a single flat gather (its autograd backward is one index_add)
+    if table.shape[1] == 1:  # one flat gather; its backward (one index_add) beats grid_sample's point-by-point one
         values = table.view(-1).index_select(0, columns.view(-1)).view(-1, 8)
         return (values * weights).sum(dim=1, keepdim=True)
     return _GatherLookup.apply(table, columns, weights)

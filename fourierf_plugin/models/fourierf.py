@@ -201,14 +201,15 @@ class FourieRFModel(nn.Module):
                 directions = directions / directions.norm(dim=-1, keepdim=True)
             else:
                 inside = t < t_exit.unsqueeze(-1)
+            march_to_opacity = not training and self.config.eval_stop_transmittance > 0
             valid = inside.clone()
-            if self.occupancy.active and inside.any():
+            if self.occupancy.active and inside.any() and not march_to_opacity:
                 valid[inside] = self.occupancy.query(xyz[inside])
         with phase("density"):
-            if training or self.config.eval_stop_transmittance <= 0:
-                sigma = self._density_at(xyz, valid)
+            if march_to_opacity:  # queries the occupancy grid itself, for the rays still alive only
+                sigma = self._density_until_opaque(xyz, inside, deltas)
             else:
-                sigma = self._density_until_opaque(xyz, valid, deltas)
+                sigma = self._density_at(xyz, valid)
         grad_scale = floaters_scale(t) if self.config.floaters_gradient_scaling and training else None
         if grad_scale is not None:
             sigma = scale_gradient(sigma, grad_scale)
@@ -253,24 +254,30 @@ class FourieRFModel(nn.Module):
             sigma = sigma.index_put((valid,), self.field.density(xyz[valid]))
         return sigma
 
-    def _density_until_opaque(self, xyz: Tensor, valid: Tensor, deltas: Tensor) -> Tensor:
+    def _density_until_opaque(self, xyz: Tensor, inside: Tensor, deltas: Tensor) -> Tensor:
         """σ [R, N] marched in segments; a ray stops being queried once its transmittance falls below
-        ``eval_stop_transmittance`` (early ray termination: what lies behind an opaque surface cannot show)."""
-        sigma = torch.zeros(valid.shape, device=xyz.device, dtype=xyz.dtype)
-        depth = torch.zeros(valid.shape[0], device=xyz.device, dtype=xyz.dtype)
+        ``eval_stop_transmittance`` (early ray termination: what lies behind an opaque surface cannot show). Samples
+        ``inside`` the box are checked against the occupancy grid segment by segment, for live rays only."""
+        sigma = torch.zeros(inside.shape, device=xyz.device, dtype=xyz.dtype)
+        depth = torch.zeros(inside.shape[0], device=xyz.device, dtype=xyz.dtype)
         max_depth = -math.log(self.config.eval_stop_transmittance)
         segment = self.config.eval_segment_samples
-        for start in range(0, valid.shape[1], segment):
+        for start in range(0, inside.shape[1], segment):
             cols = slice(start, start + segment)
             alive = depth < max_depth
             if not alive.any():
                 break
-            live = valid[:, cols] & alive.unsqueeze(-1)
-            if not live.any():
+            live = inside[:, cols] & alive.unsqueeze(-1)
+            points = xyz[:, cols][live]
+            if self.occupancy.active and points.shape[0]:
+                with phase("sampling"):
+                    occupied = self.occupancy.query(points)
+                    live, points = live.masked_scatter(live, occupied), points[occupied]
+            if not points.shape[0]:
                 continue
             # A contiguous segment then one copy: masked writes through the strided column view are ~15 % slower.
             part = torch.zeros(live.shape, device=xyz.device, dtype=xyz.dtype)
-            part[live] = self.field.density(xyz[:, cols][live])
+            part[live] = self.field.density(points)
             sigma[:, cols] = part
             depth = depth + (part * deltas[:, cols]).sum(dim=-1) * self.config.distance_scale
         return sigma

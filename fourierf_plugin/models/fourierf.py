@@ -202,8 +202,9 @@ class FourieRFModel(nn.Module):
             else:
                 inside = t < t_exit.unsqueeze(-1)
             march_to_opacity = not training and self.config.eval_stop_transmittance > 0
-            valid = inside.clone()
+            valid = inside
             if self.occupancy.active and inside.any() and not march_to_opacity:
+                valid = inside.clone()
                 valid[inside] = self.occupancy.query(xyz[inside])
         with phase("density"):
             if march_to_opacity:  # queries the occupancy grid itself, for the rays still alive only

@@ -55,14 +55,16 @@ def main() -> None:
     args.work.mkdir(parents=True, exist_ok=True)
     methods = ("fourierf-vm", "tensorf-vm")
     plan = [Run(m, args.iters, args.seed, "regnerf-3") for m in methods]
-    plan += [Run(m, args.iters, args.seed, f"regnerf-3-lr{lr:g}") for lr in args.lr_probe for m in methods]
+    extra_flags: dict[str, list[str]] = {}  # run key -> training flags beyond the protocol's
+    for lr in args.lr_probe:
+        for m in methods:
+            plan.append(Run(m, args.iters, args.seed, f"regnerf-3-lr{lr:g}"))
+            extra_flags[plan[-1].key] = ["--optimizer.lr-grids", f"{lr:g}"]
     lpips = args.shared / "lpips/lpips_alex_v0.1.pth"
 
     def execute(run: Run) -> dict:
         parser = ["llff-data", "--downscale", "8", "--num-views", "3"]
-        _, _, lr = run.views.partition("-lr")
-        extra = ["--optimizer.lr-grids", lr] if lr else []
-        return train_and_eval(run, scene, parser, args.work, lpips, "fern", extra=extra)
+        return train_and_eval(run, scene, parser, args.work, lpips, "fern", extra=extra_flags.get(run.key, []))
 
     results = run_plan(plan, args.work / "results.jsonl", execute)
     if args.re_eval:

@@ -258,8 +258,16 @@ CASES: dict[str, Case] = {
     "train: zero eval segment": Case(
         "train", train_with(f"{MODEL}.eval-segment-samples", "0"), ("eval-segment-samples 0", ">= 1")
     ),
+    "train: negative checkpoint threshold": Case(
+        "train", train_with(f"{MODEL}.checkpoint-above", "-1"), ("checkpoint-above -1", ">= 0")
+    ),
     "train: zero checkpoint chunk": Case(
         "train", train_with(f"{MODEL}.checkpoint-chunk", "0"), ("checkpoint-chunk 0", ">= 1")
+    ),
+    "train: negative dense training size": Case(
+        "train",
+        train_with(f"{MODEL}.field.dense-train-max-vertices", "-1"),
+        ("dense-train-max-vertices -1", ">= 0"),
     ),
     "train: negative dense render budget": Case(
         "train", train_with(f"{MODEL}.field.dense-render-max-mb", "-1"), ("dense-render-max-mb -1", ">= 0")

@@ -86,7 +86,7 @@ class FieldConfig:
     """When to upsample, as fractions of the run (log-spaced voxel counts)."""
     dense_train_max_vertices: int = 1 << 22
     """In training, up to this many grid vertices the density is read from a dense table (``TensorGrid.dense``,
-    rebuilt differentiably from the filtered factors at every ``prepare``): 8 values gathered per sample instead of
+    rebuilt differentiably from the filtered factors after every ``prepare``): 8 values gathered per sample instead of
     6 per component, and a much cheaper backward. Larger grids, where the table costs more than the lookups it
     saves (P-CPU 128³: 0.246 -> 0.198 s/it; 256³: ~0.7 s per build), read the factors. 0 = never."""
     dense_render_max_mb: float = 512.0
@@ -137,13 +137,13 @@ class FourierTensoRFField(nn.Module):
     def prepare(self, f_density: float, f_color: float, plane_leakage: float = 0.0, app_follow: bool = False) -> None:
         """Filter once for this iteration (or this evaluation) and cache the result for every lookup."""
         rendering = not torch.is_grad_enabled()
-        key = (f_density, f_color, plane_leakage, app_follow, self._parameter_versions())
-        if rendering and self._filtered is not None and self._render_key == key:
+        key = (f_density, f_color, plane_leakage, app_follow, self._parameter_versions()) if rendering else None
+        if key is not None and self._filtered is not None and self._render_key == key:
             return  # unchanged parameters and cutoffs (the views of one render): keep the tables already built
         filtered = self.filtered_grids(f_density, f_color, plane_leakage, app_follow)
         filtered.rendering = rendering
         self._filtered = filtered
-        self._render_key = key if rendering else None
+        self._render_key = key
 
     def _dense_table(self, kind: str) -> Tensor | None:
         """The kind's dense table for this ``prepare``, built at its first lookup (None: read the factors)."""
@@ -157,14 +157,11 @@ class FourierTensoRFField(nn.Module):
         """A dense table where the config's budgets allow it: density in training up to a vertex count, density and
         appearance in renders up to a size in MB."""
         vertices, cfg = math.prod(self.resolution), self.config
+        mb = vertices * 4 / 2**20  # one float32 channel
         if kind == "density":
-            fits = (
-                vertices * 4 / 2**20 <= cfg.dense_render_max_mb
-                if filtered.rendering
-                else (vertices <= cfg.dense_train_max_vertices)
-            )
+            fits = mb <= cfg.dense_render_max_mb if filtered.rendering else vertices <= cfg.dense_train_max_vertices
             return self.density_grid.dense(filtered.density_planes, filtered.density_lines) if fits else None
-        if not (filtered.rendering and vertices * cfg.appearance_dim * 4 / 2**20 <= cfg.dense_render_max_mb):
+        if not (filtered.rendering and mb * cfg.appearance_dim <= cfg.dense_render_max_mb):
             return None
         return self.appearance_grid.dense(filtered.appearance_planes, filtered.appearance_lines, self.basis.weight)
 
@@ -216,7 +213,7 @@ class FourierTensoRFField(nn.Module):
 
     def _decode(self, feats: Tensor, directions: Tensor | None, projected: bool) -> Tensor:
         """Basis (unless the dense table already applied it) and decoder, in bfloat16 where ``use_bfloat16`` says."""
-        if not use_bfloat16(self.config.decoder_precision, feats):
-            return self.decoder(feats if projected else self.basis(feats), directions)
-        with torch.autocast("cpu", dtype=torch.bfloat16):
-            return self.decoder(feats if projected else self.basis(feats), directions).float()
+        bf16 = use_bfloat16(self.config.decoder_precision, feats)
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+            rgb = self.decoder(feats if projected else self.basis(feats), directions)
+        return rgb.float() if bf16 else rgb

@@ -69,20 +69,25 @@ def train_and_eval(
     return row | evaluate(run_dir, run.key, work, lpips)
 
 
-def evaluate(run_dir: Path, key: str, work: Path, lpips: Path) -> dict:
-    """Evaluate a trained run on its test split: metrics and timings for its result row."""
-    eval_json = work / f"{key}.eval.json"
+def evaluate(run_dir: Path, key: str, work: Path, lpips: Path, split: str = "test") -> dict:
+    """Evaluate a trained run on one split: metrics and timings for its result row (val keys prefixed ``val_``)."""
+    tag = "" if split == "test" else f".{split}"
+    eval_json = work / f"{key}{tag}.eval.json"
     eval_cmd = [
         str(BIN / "fourierf-eval"), "--load-config", str(run_dir / "config.json"), "--output-path", str(eval_json),
-        "--lpips-weights", str(lpips),
+        "--lpips-weights", str(lpips), "--split", split,
     ]  # fmt: skip
-    eval_s, _, code = run_timed(eval_cmd, work / f"{key}.eval.log")
+    eval_s, _, code = run_timed(eval_cmd, work / f"{key}{tag}.eval.log")
     if code != 0:
-        raise RuntimeError(f"evaluation failed ({code}); see {work / f'{key}.eval.log'}")
+        raise RuntimeError(f"evaluation failed ({code}); see {work / f'{key}{tag}.eval.log'}")
     report = json.loads(eval_json.read_text())
-    return {
-        "test_views": report["num_views"], "psnr": report["results"]["psnr"], "ssim": report["results"]["ssim"],
-        "lpips": report["results"]["lpips"], "eval_seconds": eval_s,
+    metrics = {
+        "psnr": report["results"]["psnr"], "ssim": report["results"]["ssim"], "lpips": report["results"]["lpips"],
+    }  # fmt: skip
+    if split != "test":
+        return {f"{split}_{k}": v for k, v in metrics.items()} | {f"{split}_view_ids": report.get("view_ids")}
+    return metrics | {
+        "test_views": report["num_views"], "eval_seconds": eval_s,
         "eval_render_seconds": report["timings"]["render_seconds_total"],
     }  # fmt: skip
 

@@ -191,14 +191,27 @@ def test_bd_factor_option_changes_the_scale(scene: Path) -> None:
 # -- splits and the few-shot rule -----------------------------------------------------------------------------------
 
 
-def test_hold_out_is_every_eighth_image_and_val_is_test(scene: Path) -> None:
+def test_hold_out_is_every_eighth_image(scene: Path) -> None:
     test = parse(scene, "test")
     assert test.view_ids == [0, 8, 16]
     assert test.image_names == ["image000", "image008", "image016"]
-    assert parse(scene, "val").view_ids == [0, 8, 16]
     train = parse(scene, "train")
     assert train.view_ids == [i for i in range(20) if i % 8]
     assert len(train.cameras) == 17 and train.images.shape[0] == 17
+
+
+def test_few_shot_val_is_unused_training_images_evenly_spaced(scene: Path) -> None:
+    """Tuning on val must never see a test view nor a training view: fern's 3-view val is 2, 9, 18."""
+    val = parse(scene, "val", num_views=3)
+    assert val.view_ids == [2, 9, 18]
+    assert not set(val.view_ids) & ({0, 8, 16} | {1, 10, 19})
+    assert parse(scene, "val", num_views=3, val_views=5).view_ids == [2, 5, 9, 14, 18]
+    assert parse(scene, "val", view_ids=(1, 2), val_views=1).view_ids == [3]
+
+
+def test_val_falls_back_to_the_hold_out_set_when_every_training_image_is_used(scene: Path) -> None:
+    assert parse(scene, "val").view_ids == [0, 8, 16]
+    assert parse(scene, "val", num_views=17).view_ids == [0, 8, 16]
 
 
 # Spec §2.1: RegNeRF/FreeNeRF training views per scene size, for 3, 6 and 9 views.
@@ -370,7 +383,9 @@ def test_missing_data_folder(tmp_path: Path) -> None:
     assert str(tmp_path / "nowhere") in _user_error(tmp_path / "nowhere").problem
 
 
-@pytest.mark.parametrize("option", [{"downscale": 0}, {"num_views": 0}, {"hold_every": 1}, {"bd_factor": 0.0}])
+@pytest.mark.parametrize(
+    "option", [{"downscale": 0}, {"num_views": 0}, {"hold_every": 1}, {"bd_factor": 0.0}, {"val_views": 0}]
+)
 def test_bad_options(scene: Path, option: dict) -> None:
     flag = "--" + next(iter(option)).replace("_", "-")
     assert flag in _user_error(scene, **option).problem

@@ -126,15 +126,19 @@ class LLFFDataParser(DataParser):
             fail(f"--hold-every must be >= 2, got {cfg.hold_every}", "the LLFF protocol holds out every 8th image")
         if cfg.num_views is not None and cfg.num_views < 1:
             fail(f"--num-views must be >= 1, got {cfg.num_views}", "omit it to train on every training image")
+        if cfg.val_views < 1:
+            fail(f"--val-views must be >= 1, got {cfg.val_views}", "3 is the default")
         if not cfg.bd_factor > 0:
             fail(f"--bd-factor must be > 0, got {cfg.bd_factor}", "the LLFF default is 0.75")
 
     def _split_ids(self, split: Split, n: int, source: Path) -> list[int]:
         cfg = self.config
         test = list(range(0, n, cfg.hold_every))
-        if split != "train":
-            return test  # LLFF has no separate validation set; val is the hold-out set
+        if split == "test":
+            return test
         train = [i for i in range(n) if i % cfg.hold_every]
+        if split == "val":
+            return self._val_ids(train, self._split_ids("train", n, source), test)
         if cfg.view_ids is not None:
             chosen = explicit_views(cfg.view_ids, n, str(source))
             held = [i for i in chosen if i % cfg.hold_every == 0]
@@ -152,6 +156,16 @@ class LLFFDataParser(DataParser):
                 )
             return [train[i] for i in regnerf_views(len(train), cfg.num_views)]
         return train
+
+    def _val_ids(self, train: list[int], chosen: list[int], test: list[int]) -> list[int]:
+        """Few-shot runs validate on training images they do not train on, so tuning never sees the test views.
+
+        ``val_views`` of them, evenly spaced; with every training image in use, val falls back to the hold-out set.
+        """
+        unused = [i for i in train if i not in set(chosen)]
+        if not unused:
+            return test
+        return [unused[j] for j in regnerf_views(len(unused), min(self.config.val_views, len(unused)))]
 
     def get_outputs(self, split: Split) -> DataparserOutputs:
         self._check_config()
@@ -222,5 +236,7 @@ class LLFFDataParserConfig(DataParserConfig):
     """Explicit training image indices (0-based, sorted file order); overrides num_views."""
     hold_every: int = 8
     """Every k-th image is a hold-out test view (llffhold 8)."""
+    val_views: int = 3
+    """Validation views (split "val"): this many unused training images, evenly spaced; the hold-out set if none."""
     bd_factor: float = 0.75
     """Scale the scene so the nearest depth bound becomes 1 / bd_factor."""

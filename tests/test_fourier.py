@@ -10,6 +10,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from fourierf_plugin.field_components import fourier
 from fourierf_plugin.field_components.fourier import (
     OFFICIAL_PLANE_LEAKAGE,
     filter_lines,
@@ -355,3 +356,47 @@ def test_filter_backward_is_charged_to_its_own_phase() -> None:
         filter_planes(x, 0.3).square().sum().backward()
     totals = timer.take()
     assert totals["fourier_filter_backward"] > 0 and set(totals) == {"backward", "fourier_filter_backward"}
+
+
+# ------------------------------------------------------------------------------- plane filter: the matrix (band) form
+@pytest.mark.parametrize(("height", "width"), [*PLANE_SIZES, (71, 79), (47, 16)])
+@pytest.mark.parametrize("f", [0.0, 0.05, 0.3, 0.62, 0.97])
+@pytest.mark.parametrize("leakage", [0.0, OFFICIAL_PLANE_LEAKAGE])
+def test_band_form_equals_the_fft_filter(height: int, width: int, f: float, leakage: float) -> None:
+    """Both implementations are the same operator, whichever one ``filter_planes`` picks for a shape."""
+    planes = _rand(2, height, width, seed=height + 7 * width)
+    operators = fourier._band_operators(height, width, f, "cpu", torch.float64)
+    mask = plane_mask(height, width, f, leakage, dtype=torch.float64)
+    ref = torch.fft.irfft2(torch.fft.rfft2(planes) * mask, s=(height, width))
+    torch.testing.assert_close(fourier._band_filter(planes, operators, leakage), ref, atol=1e-11, rtol=0)
+
+
+def test_band_form_is_picked_for_small_cutoffs_and_awkward_sizes() -> None:
+    """fern's NDC planes (prime factors 71, 79) take the matrices; a wide band on a 128² plane takes the FFTs."""
+    assert fourier._fft_slowdown(142) == 4 and fourier._fft_slowdown(128) == 1 and fourier._fft_slowdown(94) == 2
+    assert fourier._prefer_band(142, 158, 0.05) and fourier._prefer_band(142, 158, 0.3)
+    assert fourier._prefer_band(128, 128, 0.05)
+    assert not fourier._prefer_band(128, 128, 0.6)
+
+
+def test_band_form_output_and_gradient_through_filter_planes() -> None:
+    shape, f = (2, 71, 79), 0.3
+    assert fourier._prefer_band(71, 79, f)
+    x = torch.randn(shape, dtype=torch.float64, requires_grad=True)
+    g = torch.randn(shape, dtype=torch.float64)
+    out = filter_planes(x, f, OFFICIAL_PLANE_LEAKAGE)
+    mask = plane_mask(71, 79, f, OFFICIAL_PLANE_LEAKAGE, dtype=torch.float64)
+    ref_out = torch.fft.irfft2(torch.fft.rfft2(x) * mask, s=shape[-2:])
+    torch.testing.assert_close(out, ref_out, atol=1e-11, rtol=0)
+    (ours,) = torch.autograd.grad(out, x, g)
+    (ref,) = torch.autograd.grad(ref_out, x, g)
+    torch.testing.assert_close(ours, ref, atol=1e-11, rtol=0)
+
+
+def test_band_form_in_float32_stays_close_to_the_fft() -> None:
+    planes = torch.randn(1, 16, 142, 94)
+    out = filter_planes(planes, 0.2)
+    mask = plane_mask(142, 94, 0.2, dtype=torch.float64)
+    ref = torch.fft.irfft2(torch.fft.rfft2(planes.double()) * mask, s=(142, 94))
+    assert out.dtype == torch.float32
+    torch.testing.assert_close(out.double(), ref, atol=2e-5, rtol=0)

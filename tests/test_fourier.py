@@ -360,7 +360,7 @@ def test_filter_backward_is_charged_to_its_own_phase() -> None:
 
 # ------------------------------------------------------------------------------- plane filter: the matrix (band) form
 @pytest.mark.parametrize(("height", "width"), [*PLANE_SIZES, (71, 79), (47, 16)])
-@pytest.mark.parametrize("f", [0.0, 0.05, 0.3, 0.62, 0.97])
+@pytest.mark.parametrize("f", [0.0, 0.05, 0.3, 0.62, 0.85, 0.97])
 @pytest.mark.parametrize("leakage", [0.0, OFFICIAL_PLANE_LEAKAGE])
 def test_band_form_equals_the_fft_filter(height: int, width: int, f: float, leakage: float) -> None:
     """Both implementations are the same operator, whichever one ``filter_planes`` picks for a shape."""
@@ -377,6 +377,14 @@ def test_band_form_is_picked_for_small_cutoffs_and_awkward_sizes() -> None:
     assert fourier._prefer_band(142, 158, 0.05) and fourier._prefer_band(142, 158, 0.3)
     assert fourier._prefer_band(128, 128, 0.05)
     assert not fourier._prefer_band(128, 128, 0.6)
+
+
+def test_band_form_filters_the_complement_once_whole_columns_are_kept() -> None:
+    """Wide bands keep whole rfft columns; the matrices then work on the few columns that lose something."""
+    assert fourier._band_span(142, 158, 0.3) == (0, 34, False)  # direct: the columns kw <= rho = 33.5
+    start, stop, complement = fourier._band_span(142, 158, 0.8)  # rho = 89.4 > H/2 = 71: kw <= 54 keep all
+    assert complement and (start, stop) == (55, 80)
+    assert fourier._band_span(71, 79, 0.85)[2]
 
 
 def test_band_form_output_and_gradient_through_filter_planes() -> None:

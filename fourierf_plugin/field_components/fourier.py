@@ -16,6 +16,10 @@ Both filters are real, even convolutions (the masks are real and symmetric under
 adjoint: the backward pass applies the same filter to the incoming gradient (``_LowPass``). That gives exactly the
 autograd gradient and lets the profiler charge the backward FFTs to the filtering.
 
+Planes are filtered by FFTs or, where cheaper (small cutoffs, nearly full bands, sizes with large prime factors such
+as fern's NDC grids), by the same operator in matrix form: a real DFT along W over the rfft columns the disc cuts,
+a circulant low-pass along H per column, and irfft's synthesis (``_band_operators``).
+
 Both filters are circular: energy leaks across opposite faces of the AABB (an impulse on one border shows up on the
 other). That is what the method does, so it is kept and documented rather than padded away.
 """
@@ -216,21 +220,43 @@ def _fft_slowdown(n: int) -> int:
     return 1 if largest <= 7 else 2 if largest <= 50 else 4
 
 
-def _band_columns(height: int, width: int, f: float) -> int:
-    """rfft columns ``kw = 0..K-1`` the disc touches (``kw <= rho``)."""
-    return min(width // 2, math.isqrt(math.floor(_radius_sq(height, width, f)))) + 1
+@lru_cache(maxsize=_CACHE_SIZE)
+def _column_reach(height: int, width: int, f: float) -> tuple[int, ...]:
+    """Per rfft column ``kw = 0..W//2``: the largest kept ``|kh|`` (``kh^2 <= rho^2 - kw^2``), -1 if none is kept.
+
+    A column with reach ``H//2`` keeps every kh (its low-pass is the identity). Reaches never increase with kw.
+    """
+    r2 = _radius_sq(height, width, f)
+    return tuple(
+        min(height // 2, math.isqrt(math.floor(r2 - kw * kw))) if kw * kw <= r2 else -1 for kw in range(width // 2 + 1)
+    )
+
+
+def _band_span(height: int, width: int, f: float) -> tuple[int, int, bool]:
+    """The rfft columns ``[start, stop)`` the matrix form works on, and whether it filters the complement.
+
+    Direct: the columns that keep anything (a prefix). Complement, ``P - (I - filter) P``: the columns that do not
+    keep everything (a suffix), fewer once the disc covers whole columns (wide bands).
+    """
+    reach = _column_reach(height, width, f)
+    kept = sum(r >= 0 for r in reach)
+    whole = sum(r == height // 2 for r in reach)
+    if len(reach) - whole < kept:
+        return whole, len(reach), True
+    return 0, kept, False
 
 
 def _prefer_band(height: int, width: int, f: float) -> bool:
     """Whether the matrix form of the filter (``_band_operators``) is cheaper than an rfft2/irfft2 pair.
 
-    Per plane row the matrices cost ``K (2W + H)`` multiply-pairs for the ``K`` kept rfft columns, and the FFT pair
+    Per plane row the matrices cost ``K (2W + H)`` multiply-pairs for the ``K`` columns they touch, and the FFT pair
     about ``W log2(HW)`` butterflies times the size's slowdown; a multiply-add in a matmul ran ~3.5x cheaper than a
     butterfly on this CPU (2 threads). Small cutoffs and awkward sizes go to the matrices, wide bands on smooth
     sizes to the FFTs.
     """
     slowdown = max(_fft_slowdown(height), _fft_slowdown(width))
-    band_cost = _band_columns(height, width, f) * (2 * width + height)
+    start, stop, _ = _band_span(height, width, f)
+    band_cost = (stop - start) * (2 * width + height)
     return band_cost < 3.5 * width * math.log2(height * width) * slowdown
 
 
@@ -262,34 +288,42 @@ def _lowpass_kernels(height: int, device: str, dtype: torch.dtype) -> tuple[Tens
 
 
 @lru_cache(maxsize=4)  # the planes of one iteration (three shapes, one cutoff); the cutoff moves every step
-def _band_operators(height: int, width: int, f: float, device: str, dtype: torch.dtype) -> tuple[Tensor, ...]:
-    """The disc low-pass (no leakage) as three real operators that touch only the kept rfft columns ``kw < K``.
+def _band_operators(
+    height: int, width: int, f: float, device: str, dtype: torch.dtype
+) -> tuple[Tensor, Tensor, Tensor, bool]:
+    """The disc low-pass (no leakage) as three real operators on the rfft columns of ``_band_span``.
 
-    ``forward`` [W, 2K] is the real DFT along W (cos | -sin), ``columns`` [K, H, H] holds, for each kept ``kw``,
+    ``forward`` [W, 2K] is the real DFT along W (cos | -sin), ``columns`` [K, H, H] holds, for each column ``kw``,
     the low-pass along H that keeps ``kh^2 <= rho^2 - kw^2`` (a real symmetric circulant, since the kept set is
-    symmetric in kh; it filters the cos and the sin part alike), and ``inverse`` [2K, W] is irfft's synthesis.
-    Their product is exactly ``irfft2(rfft2(P) * disc)``.
+    symmetric in kh; it filters the cos and the sin part alike), or identity minus it for the complement, and
+    ``inverse`` [2K, W] is irfft's synthesis. Direct: the filter is their product; complement: P minus it. Either
+    way it is exactly ``irfft2(rfft2(P) * disc)``.
     """
-    k = _band_columns(height, width, f)
+    start, stop, complement = _band_span(height, width, f)
     analysis, synthesis = _rdft_tables(width, device, dtype)
     kernels, lags = _lowpass_kernels(height, device, dtype)
-    r2 = _radius_sq(height, width, f)
-    reach = [min(height // 2, math.isqrt(math.floor(r2 - kw * kw))) for kw in range(k)]  # largest kept |kh| per kw
-    columns = kernels[torch.tensor(reach, device=kernels.device)][:, lags]
-    forward = analysis[:, :, :k].reshape(width, 2 * k)
-    return forward, columns, synthesis[:, :k].reshape(2 * k, width)
+    reach = torch.tensor(_column_reach(height, width, f)[start:stop], dtype=torch.long, device=kernels.device)
+    chosen = torch.where(reach[:, None] >= 0, kernels[reach.clamp(min=0)], 0.0)  # reach -1: nothing kept
+    if complement:
+        chosen = -chosen
+        chosen[:, 0] += 1.0  # identity minus the low-pass: the impulse at lag 0
+    k = stop - start
+    forward = analysis[:, :, start:stop].reshape(width, 2 * k)
+    return forward, chosen[:, lags], synthesis[:, start:stop].reshape(2 * k, width), complement
 
 
-def _band_filter(x: Tensor, operators: tuple[Tensor, ...], leakage: float) -> Tensor:
-    forward, columns, inverse = operators
+def _band_filter(x: Tensor, operators: tuple[Tensor, Tensor, Tensor, bool], leakage: float) -> Tensor:
+    forward, columns, inverse, complement = operators
     height, width = x.shape[-2:]
     k = columns.shape[0]
     rows = x.reshape(-1, height, width)
     batch = rows.shape[0]
-    # [B, H, 2, K] -> [K, H, 2B]: one matmul per kept column, applied to its cos and sin parts together.
+    # [B, H, 2, K] -> [K, H, 2B]: one matmul per column, applied to its cos and sin parts together.
     spectrum = (rows @ forward).view(batch, height, 2, k).permute(3, 1, 2, 0).reshape(k, height, 2 * batch)
     filtered = torch.bmm(columns, spectrum).view(k, height, 2, batch).permute(3, 1, 2, 0).reshape(batch, height, 2 * k)
     out = (filtered @ inverse).reshape(x.shape)
+    if complement:
+        out = x - out
     return out + leakage * x if leakage else out
 
 

@@ -8,7 +8,8 @@ The preset's grid learning rate (TensoRF's 0.02) is tuned for 25k iterations; at
 at the other rates in ``--lr-grids``, and rates are picked by PSNR on the validation views (training images neither
 method trains on: 2, 9, 18); the test views never take part in that choice. The headline compares the two methods at
 the rate fourierf-vm's validation picks (the same pipeline with the masks off); each method at its own best rate is
-reported beside it. The picked fourierf-vm run is then rendered along a spiral (GIF) by `fourierf-render spiral`.
+reported beside it. The grid runs with the first of ``--seeds``; the compared runs are repeated with the others. The
+picked fourierf-vm run is then rendered along a spiral (GIF) by `fourierf-render spiral`.
 
     python benchmarks/llff_fewshot.py --shared ../shared
     python benchmarks/llff_fewshot.py --re-eval     # re-evaluate the finished runs (e.g. after a renderer change)
@@ -20,11 +21,13 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
 from common import (
     BIN,
     REPO,
     Run,
     evaluate,
+    fmt,
     load_results,
     run_plan,
     run_timed,
@@ -54,13 +57,16 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--shared", type=Path, default=REPO.parent / "shared")
     ap.add_argument("--work", type=Path, default=REPO / "outputs" / "bench_llff_fewshot")
-    ap.add_argument("--seed", type=int, default=20211202)
+    ap.add_argument(
+        "--seeds", type=int, nargs="+", default=[20211202, 1, 2],
+        help="the first trains the learning-rate grid; the others repeat the compared runs at the validated rates",
+    )  # fmt: skip
     ap.add_argument("--iters", type=int, default=800)
     ap.add_argument("--spiral-frames", type=int, default=30)
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")
     ap.add_argument("--re-eval", action="store_true", help="re-run only the evaluation of finished runs")
     ap.add_argument(
-        "--lr-grids", type=float, nargs="+", default=[PRESET_LR_GRIDS, 0.04, 0.08, 0.16, 0.32],
+        "--lr-grids", type=float, nargs="+", default=[PRESET_LR_GRIDS, 0.04, 0.08, 0.16, 0.32, 0.64],
         help="grid learning rates tried; the best on the validation views is the one reported",
     )  # fmt: skip
     args = ap.parse_args()
@@ -68,7 +74,7 @@ def main() -> None:
     if not (scene / "poses_bounds.npy").is_file():
         sys.exit(f"error: {scene} not found; pass --shared PATH_TO_SHARED")
     args.work.mkdir(parents=True, exist_ok=True)
-    plan = [Run(m, args.iters, args.seed, views_label(lr)) for lr in args.lr_grids for m in METHODS]
+    plan = [Run(m, args.iters, args.seeds[0], views_label(lr)) for lr in args.lr_grids for m in METHODS]
     lpips = args.shared / "lpips/lpips_alex_v0.1.pth"
 
     def execute(run: Run) -> dict:
@@ -89,6 +95,26 @@ def main() -> None:
         everything[key] = row
     save_results(args.work / "results.jsonl", everything)
     chosen = {m: max((r for r in results.values() if r["method"] == m), key=lambda r: r["val_psnr"]) for m in METHODS}
+    f, t = chosen["fourierf-vm"], chosen["tensorf-vm"]
+    compared = {("fourierf-vm", f["views"]), ("tensorf-vm", f["views"]), ("tensorf-vm", t["views"])}
+    repeats = run_plan(
+        [Run(m, args.iters, seed, views) for seed in args.seeds[1:] for m, views in sorted(compared)],
+        args.work / "results.jsonl",
+        execute,
+    )
+
+    def seeds_of(method: str, views: str) -> list[dict]:
+        return [r for r in [*results.values(), *repeats.values()] if r["method"] == method and r["views"] == views]
+
+    def versus(a: list[dict], b: list[dict]) -> str:
+        gap = np.mean([r["psnr"] for r in a]) - np.mean([r["psnr"] for r in b])
+        ratio = np.mean([r["train_seconds"] for r in a]) / np.mean([r["train_seconds"] for r in b])
+        return (
+            f"{fmt([r['psnr'] for r in a], 2)} vs {fmt([r['psnr'] for r in b], 2)} dB ({len(a)} seeds), "
+            f"**{gap:+.2f} dB**; training {fmt([r['train_seconds'] for r in a], 0)} vs "
+            f"{fmt([r['train_seconds'] for r in b], 0)} s, **{ratio:.2f}×**"
+        )
+
     spiral_dir = args.work / "spiral"
     fourierf = chosen["fourierf-vm"]
     render = [
@@ -99,9 +125,7 @@ def main() -> None:
     spiral = f"spiral render: `{spiral_dir}` ({args.spiral_frames} frames at 252×189, {seconds:.0f} s)"
     if code != 0:
         spiral = f"spiral render failed (exit {code}); see {args.work / 'spiral.log'}"
-    f, t = chosen["fourierf-vm"], chosen["tensorf-vm"]
     by_lr = {(r["method"], lr_of(r["views"])): r for r in results.values()}
-    masks_off = by_lr.get(("tensorf-vm", lr_of(f["views"])))
     body = [
         *section_head(
             "Few-shot fern (LLFF, 3 views, 504×378, NDC, CPU)",
@@ -129,18 +153,14 @@ def main() -> None:
         )
         + ".",
         "",
-        *(
-            [
-                f"- **Masks on vs off** (the same pipeline at fourierf-vm's validated rate {lr_of(f['views']):g}): "
-                f"{f['psnr']:.2f} vs {masks_off['psnr']:.2f} dB, {f['psnr'] - masks_off['psnr']:+.2f} dB; "
-                f"training time {f['train_seconds'] / masks_off['train_seconds']:.2f}×."
-            ]
-            if masks_off
-            else []
-        ),
-        f"- Each at its own validated rate: fourierf-vm (lr {lr_of(f['views']):g}) − tensorf-vm "
-        f"(lr {lr_of(t['views']):g}) = {f['psnr'] - t['psnr']:+.2f} dB; "
-        f"training time {f['train_seconds'] / t['train_seconds']:.2f}×.",
+        f"Seed {args.seeds[0]} above; the compared runs below are repeated with seeds {args.seeds[1:]} (mean ± std):",
+        "",
+        f"- **Masks on vs off** (the same pipeline at fourierf-vm's validated rate {lr_of(f['views']):g}): "
+        + versus(seeds_of("fourierf-vm", f["views"]), seeds_of("tensorf-vm", f["views"]))
+        + ".",
+        f"- Each at its own validated rate (fourierf-vm {lr_of(f['views']):g}, tensorf-vm {lr_of(t['views']):g}): "
+        + versus(seeds_of("fourierf-vm", f["views"]), seeds_of("tensorf-vm", t["views"]))
+        + ".",
         "",
         "Rendering the 3 hold-out views at 504×378 (fourierf-eval, render time alone): "
         + ", ".join(f"{m} (lr {lr_of(r['views']):g}) {r['eval_render_seconds']:.0f} s" for m, r in chosen.items())

@@ -49,10 +49,6 @@ def views_label(lr: float) -> str:
     return VIEWS if lr == PRESET_LR_GRIDS else f"{VIEWS}-lr{lr:g}"
 
 
-def lr_of(label: str) -> float:
-    return PRESET_LR_GRIDS if label == VIEWS else float(label.removeprefix(f"{VIEWS}-lr"))
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--shared", type=Path, default=REPO.parent / "shared")
@@ -74,7 +70,9 @@ def main() -> None:
     if not (scene / "poses_bounds.npy").is_file():
         sys.exit(f"error: {scene} not found; pass --shared PATH_TO_SHARED")
     args.work.mkdir(parents=True, exist_ok=True)
-    plan = [Run(m, args.iters, args.seeds[0], views_label(lr)) for lr in args.lr_grids for m in METHODS]
+    lr_by_label = {views_label(lr): lr for lr in args.lr_grids}  # every planned row's label is one of these
+    lr_of = lr_by_label.__getitem__
+    plan = [Run(m, args.iters, args.seeds[0], label) for label in lr_by_label for m in METHODS]
     lpips = args.shared / "lpips/lpips_alex_v0.1.pth"
 
     def execute(run: Run) -> dict:

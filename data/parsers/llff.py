@@ -162,7 +162,8 @@ class LLFFDataParser(DataParser):
 
         ``val_views`` of them, evenly spaced; with every training image in use, val falls back to the hold-out set.
         """
-        unused = [i for i in train if i not in set(chosen)]
+        in_use = set(chosen)
+        unused = [i for i in train if i not in in_use]
         if not unused:
             return test
         return [unused[j] for j in regnerf_views(len(unused), min(self.config.val_views, len(unused)))]

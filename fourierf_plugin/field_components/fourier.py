@@ -344,18 +344,20 @@ def filter_planes(planes: Tensor, f: float, leakage: float = 0.0) -> Tensor:
     if _plane_full(height, width, f):
         return planes if leakage == 0.0 else planes * (1.0 + leakage)
     work_dtype = _fft_dtype(planes)
+    device = _device_key(planes.device)
     if _prefer_band(height, width, f):
-        operators = _band_operators(height, width, f, _device_key(planes.device), work_dtype)
+        operators = _band_operators(height, width, f, device, work_dtype)
 
-        def apply(x: Tensor) -> Tensor:
-            return _band_filter(x.to(work_dtype), operators, leakage).to(x.dtype)
+        def lowpass(x: Tensor) -> Tensor:
+            return _band_filter(x, operators, leakage)
+    else:
+        mask = _plane_mask_cached(height, width, f, leakage, device, work_dtype)
 
-        return _LowPass.apply(planes, apply)
-    mask = _plane_mask_cached(height, width, f, leakage, _device_key(planes.device), work_dtype)
+        def lowpass(x: Tensor) -> Tensor:
+            return torch.fft.irfft2(torch.fft.rfft2(x, dim=(-2, -1)) * mask, s=(height, width), dim=(-2, -1))
 
     def apply(x: Tensor) -> Tensor:
-        spectrum = torch.fft.rfft2(x.to(work_dtype), dim=(-2, -1))
-        return torch.fft.irfft2(spectrum * mask, s=(height, width), dim=(-2, -1)).to(x.dtype)
+        return lowpass(x.to(work_dtype)).to(x.dtype)
 
     return _LowPass.apply(planes, apply)
 

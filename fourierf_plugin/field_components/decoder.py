@@ -45,10 +45,18 @@ class AppearanceDecoder(nn.Module):
     def view_dependent(self) -> bool:
         return self.view_layer is not None
 
+    def view_term(self, directions: Tensor | None) -> Tensor | None:
+        """The view-dependent part of the hidden layer, ``W_d SH₂(d)`` [N, hidden] (None for a view-independent
+        decoder)."""
+        if self.view_layer is None:
+            return None
+        if directions is None:
+            raise ValueError("a view-dependent decoder needs ray directions")
+        return self.view_layer(spherical_harmonics_deg2(directions))
+
     def forward(self, features: Tensor, directions: Tensor | None = None) -> Tensor:
         h = self.feature_layer(F.silu(features))
-        if self.view_layer is not None:
-            if directions is None:
-                raise ValueError("a view-dependent decoder needs ray directions")
-            h = h + self.view_layer(spherical_harmonics_deg2(directions))
+        view = self.view_term(directions)
+        if view is not None:
+            h = h + view
         return torch.sigmoid(self.output_layer(F.silu(h)))

@@ -18,6 +18,7 @@ from torch import Tensor, nn
 
 from fourierf_plugin.field_components.decoder import AppearanceDecoder
 from fourierf_plugin.field_components.fourier import filter_lines, filter_planes
+from fourierf_plugin.field_components.fused_decoder import fused_decode
 from fourierf_plugin.field_components.tensor_grids import (
     Factor,
     TensorCP,
@@ -208,8 +209,10 @@ class FourierTensoRFField(nn.Module):
         table = self._dense_table("appearance")
         if table is not None:
             return self._decode(interp_volume(table, self.resolution, x), directions, projected=True)
-        feats = torch.cat(self.appearance_grid.features(*self.filtered.lookup_factors("appearance"), x), dim=-1)
-        return self._decode(feats, directions, projected=False)
+        groups = self.appearance_grid.features(*self.filtered.lookup_factors("appearance"), x)
+        if torch.is_grad_enabled() and not use_bfloat16(self.config.decoder_precision, groups[0]):
+            return fused_decode(groups, self.basis.weight, self.decoder, directions)  # training: the chunked MLP
+        return self._decode(torch.cat(groups, dim=-1), directions, projected=False)
 
     def _decode(self, feats: Tensor, directions: Tensor | None, projected: bool) -> Tensor:
         """Basis (unless the dense table already applied it) and decoder, in bfloat16 where ``use_bfloat16`` says."""

@@ -395,9 +395,11 @@ def test_dense_table_lookup_is_the_factored_lookup(cls: type, reso: list[int]) -
     assert summed.shape == (400, 1) and projected.shape == (400, 5)
     torch.testing.assert_close(summed, feats.sum(dim=-1, keepdim=True), atol=1e-12, rtol=0)
     torch.testing.assert_close(projected, feats @ weight.T, atol=1e-12, rtol=0)
-    with torch.no_grad():  # renders read one-channel tables through grid_sample instead of gathers
+    with torch.no_grad():  # renders bake slab by slab and read one-channel tables through grid_sample
         rendered = interp_volume(grid.dense(planes, lines), reso, xyz)
+        rendered_projected = interp_volume(grid.dense(planes, lines, weight), reso, xyz)
     torch.testing.assert_close(rendered, summed.detach(), atol=1e-12, rtol=0)
+    torch.testing.assert_close(rendered_projected, projected.detach(), atol=1e-12, rtol=0)
 
 
 @pytest.mark.parametrize("cls", [TensorVM, TensorCP])
@@ -449,11 +451,13 @@ def _reference_scatter(grad: torch.Tensor, columns: torch.Tensor, weights: torch
     return out
 
 
+@pytest.mark.parametrize("channels", [1, 5])
+@pytest.mark.parametrize("index_dtype", [torch.int32, torch.int64])
 @pytest.mark.parametrize("rows", [3, 40, 5000])  # few rows (sorted path) and many more rows than lookups (index_add)
-def test_scatter_rows_is_the_adjoint_of_the_weighted_gather(rows: int) -> None:
+def test_scatter_rows_is_the_adjoint_of_the_weighted_gather(rows: int, index_dtype: torch.dtype, channels: int) -> None:
     g = torch.Generator().manual_seed(0)
-    n, k, c = 37, 4, 5
-    columns = torch.randint(0, rows, (n, k), generator=g)
+    n, k, c = 37, 4, channels
+    columns = torch.randint(0, rows, (n, k), generator=g).to(index_dtype)
     weights = torch.rand(n, k, generator=g, dtype=torch.float64)
     grad = torch.randn(n, c, generator=g, dtype=torch.float64)
     expected = _reference_scatter(grad, columns, weights, rows)
@@ -472,7 +476,7 @@ def test_corner_lookup_is_the_explicit_multilinear_stencil(sizes: tuple[int, ...
     coords = torch.rand(9, len(sizes), generator=g, dtype=torch.float64) * 2.4 - 1.2  # some outside: clamped
     axes = [axis_corners(coords[:, a], size) for a, size in enumerate(sizes)]
     strides = [int(torch.tensor(sizes[:a]).prod()) for a in range(len(sizes))]
-    columns, weights = corner_lookup(axes, strides)
+    columns, weights = corner_lookup(axes, strides, int(torch.tensor(sizes).prod()))
     assert columns.shape == weights.shape == (9, 2 ** len(sizes))
     for n in range(9):
         for corner, bits in enumerate(itertools.product((0, 1), repeat=len(sizes))):

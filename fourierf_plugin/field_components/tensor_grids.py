@@ -34,24 +34,26 @@ def axis_corners(coord: Tensor, size: int) -> AxisCorners:
     x = ((coord + 1.0) * (0.5 * (size - 1))).clamp(0, size - 1)
     lower = x.floor().clamp(max=max(size - 2, 0))
     frac = x - lower
-    return AxisCorners(lower.long(), min(size - 1, 1), (1.0 - frac, frac))
+    return AxisCorners(lower.int(), min(size - 1, 1), (1.0 - frac, frac))
 
 
-def corner_lookup(axes: Sequence[AxisCorners], strides: Sequence[int]) -> tuple[Tensor, Tensor]:
+def corner_lookup(axes: Sequence[AxisCorners], strides: Sequence[int], rows: int) -> tuple[Tensor, Tensor]:
     """Row indices [N, 2^d] and weights [N, 2^d] of the multilinear lookup over ``axes`` (first axis fastest) in a
-    row-major table whose axis strides are ``strides``.
+    row-major table of ``rows`` rows whose axis strides are ``strides``.
 
     The indices are one base row plus fixed corner offsets (one broadcast); the weights are products of [N] columns
-    stacked once: a broadcast product over 2-wide rows runs ~3x slower on CPU.
+    stacked once: a broadcast product over 2-wide rows runs ~3x slower on CPU. Indices are int32 where the table
+    allows (the lookups and the backward's sort run on half the bytes).
     """
-    base = axes[0].lower * strides[0]
+    index_dtype = torch.int32 if rows < 2**31 else torch.int64
+    base = axes[0].lower.to(index_dtype) * strides[0]
     offsets = [0, axes[0].step * strides[0]]
     weights = list(axes[0].weights)
     for ax, stride in zip(axes[1:], strides[1:], strict=True):
-        base = base + ax.lower * stride
+        base = base + ax.lower.to(index_dtype) * stride
         offsets = [o + corner * ax.step * stride for corner in (0, 1) for o in offsets]
         weights = [w_ax * w for w_ax in ax.weights for w in weights]
-    columns = base.unsqueeze(1) + torch.tensor(offsets, device=base.device)
+    columns = base.unsqueeze(1) + torch.tensor(offsets, dtype=index_dtype, device=base.device)
     return columns, torch.stack(weights, dim=1)
 
 
@@ -66,10 +68,13 @@ def scatter_rows(grad: Tensor, columns: Tensor, weights: Tensor, rows: int) -> T
     n, k = columns.shape
     flat = columns.reshape(-1)
     if rows > n * k:
+        flat = flat.long()  # CPU index_add_ takes a ~5x slower path with int32 indices
+        if grad.shape[1] == 1:  # one channel: a 1-D accumulation, ~2x faster than into [rows, 1]
+            return grad.new_zeros(rows).index_add_(0, flat, (grad * weights).reshape(-1)).unsqueeze(1)
         values = (grad.unsqueeze(1) * weights.unsqueeze(-1)).reshape(n * k, grad.shape[1])
         return grad.new_zeros(rows, grad.shape[1]).index_add_(0, flat, values)
     ordered, order = torch.sort(flat, stable=True)  # stable: the sums run in one fixed order (reproducible runs)
-    offsets = torch.searchsorted(ordered, torch.arange(rows, device=flat.device))
+    offsets = torch.searchsorted(ordered, torch.arange(rows, dtype=flat.dtype, device=flat.device))
     points = order.div(k, rounding_mode="floor")
     return F.embedding_bag(points, grad, offsets, mode="sum", per_sample_weights=weights.reshape(-1)[order])
 
@@ -149,7 +154,7 @@ def interp_volume(table: Tensor, reso: Sequence[int], xyz: Tensor) -> Tensor:
         volume, points = table.view(1, 1, reso[2], reso[1], reso[0]), xyz.view(1, -1, 1, 1, 3)
         return F.grid_sample(volume, points, mode="bilinear", align_corners=True, padding_mode="border").view(-1, 1)
     axes = [axis_corners(xyz[:, a], reso[a]) for a in range(3)]
-    columns, weights = corner_lookup(axes, (1, reso[0], reso[0] * reso[1]))
+    columns, weights = corner_lookup(axes, (1, reso[0], reso[0] * reso[1]), table.shape[0])
     return _GatherLookup.apply(table, columns, weights.to(table.dtype))
 
 
@@ -164,7 +169,7 @@ def interp_plane(plane: Factor, u: Tensor, v: Tensor, gather: bool | None = None
         out = F.grid_sample(plane.unsqueeze(0), grid, mode="bilinear", align_corners=True, padding_mode="border")
         return out.view(plane.shape[0], -1).T
     h, w = plane.shape[-2:]
-    columns, weights = corner_lookup([axis_corners(u, w), axis_corners(v, h)], (1, w))
+    columns, weights = corner_lookup([axis_corners(u, w), axis_corners(v, h)], (1, w), h * w)
     return _gather_lookup(plane, columns, weights.to(_dtype(plane)))
 
 
@@ -172,7 +177,7 @@ def interp_lines(line: Factor, coord: Tensor, gather: bool | None = None) -> Ten
     """Linear interpolation of a [C, L] line at normalised coords in [-1, 1] (align_corners=True), -> [N, C]."""
     if not _use_gather(line, (coord,), gather):
         return interp_plane(line.unsqueeze(-1), torch.zeros_like(coord), coord, gather=False)
-    columns, weights = corner_lookup([axis_corners(coord, line.shape[1])], (1,))
+    columns, weights = corner_lookup([axis_corners(coord, line.shape[-1])], (1,), line.shape[-1])
     return _gather_lookup(line, columns, weights.to(_dtype(line)))
 
 
@@ -260,6 +265,9 @@ class TensorVM(TensorGrid):
         ]
 
     def dense(self, planes: Sequence[Tensor], lines: Sequence[Tensor], weight: Tensor | None = None) -> Tensor:
+        inputs = [*planes, *lines] + ([weight] if weight is not None else [])
+        if not (torch.is_grad_enabled() and any(t.requires_grad for t in inputs)):
+            return self._dense_by_slab(planes, lines, weight)
         reso = self.resolution
         total: Tensor | None = None
         offset = 0
@@ -275,6 +283,28 @@ class TensorVM(TensorGrid):
             total = _accumulate(total, part)
         assert total is not None
         return total.reshape(-1, total.shape[-1])
+
+    def _dense_by_slab(self, planes: Sequence[Tensor], lines: Sequence[Tensor], weight: Tensor | None) -> Tensor:
+        """``dense`` without gradients, one z-slab of the table at a time.
+
+        Why: a render's appearance table is hundreds of MB; building each group's full-size product, permuting it and
+        summing writes it ~5 times over, while a slab's three products stay in cache and land in the table directly.
+        Plane/line pairs by ``MAT_MODES``/``VEC_MODES``: A = (xy, z), B = (xz, y), C = (yz, x).
+        """
+        (plane_a, plane_b, plane_c), (line_a, line_b, line_c) = planes, lines
+        widths = [p.shape[0] for p in planes]
+        proj = [_projection(weight, sum(widths[:i]), c, planes[i]).T for i, c in enumerate(widths)]  # [C_i, D]
+        nx, ny, nz = self.resolution
+        d = proj[0].shape[1]
+        table = plane_a.new_empty(nz, ny * nx, d)
+        rows_a = plane_a.reshape(widths[0], -1).T  # [Y·X, C]
+        line_c_proj = (line_c.unsqueeze(-1) * proj[2].unsqueeze(1)).reshape(widths[2], -1)  # [C, X·D]
+        for z in range(nz):
+            slab = table[z]
+            torch.mm(rows_a, line_a[:, z : z + 1] * proj[0], out=slab)
+            plane_b_proj = (plane_b[:, z, :].unsqueeze(-1) * proj[1].unsqueeze(1)).reshape(widths[1], -1)
+            slab.view(ny, nx * d).addmm_(line_b.T, plane_b_proj).addmm_(plane_c[:, z, :].T, line_c_proj)
+        return table.reshape(-1, d)
 
 
 class TensorCP(TensorGrid):

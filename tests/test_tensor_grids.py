@@ -505,3 +505,15 @@ def test_gather_lookup_of_no_points_is_empty_with_a_graph() -> None:
     assert out.shape == (0, 4)
     out.sum().backward()
     assert torch.equal(plane.grad, torch.zeros_like(plane))
+
+
+@pytest.mark.parametrize("reso", [[4, 3, 5], [1, 3, 2]])
+def test_summed_vm_table_backward_passes_gradcheck(reso: list[int]) -> None:
+    """Training's density table (``dense`` without a projection) has a hand-written backward: check it numerically."""
+    grid = _grid64(TensorVM, reso)
+    params = [p.detach().clone().requires_grad_() for p in (*grid.planes, *grid.lines)]
+
+    def table(*factors: torch.Tensor) -> torch.Tensor:
+        return grid.dense(list(factors[:3]), list(factors[3:]))
+
+    assert torch.autograd.gradcheck(table, tuple(params))

@@ -483,8 +483,10 @@ class FourieRFModelConfig(InstantiateConfig):
     samples would cost ~45 ms per iteration, hence the threshold. 0 = never."""
     checkpoint_chunk: int = 32768
     """Shaded samples per checkpointed chunk (see ``checkpoint_above``)."""
-    eval_chunk_rays: int = 1024
-    """Rays per chunk when rendering whole images (small chunks keep the temporaries in the recycled heap)."""
+    eval_chunk_rays: int = 2048
+    """Rays per chunk when rendering whole images: small enough that the temporaries stay in the recycled heap
+    (under glibc's 32 MB mmap ceiling), large enough to amortise the per-chunk work (P-CPU renders: 512 rays 1.90 s,
+    1024 1.69 s, 2048 1.44 s, 4096 1.76 s for the same 60k rays)."""
     eval_stop_transmittance: float = 1e-4
     """Evaluation renders stop querying a ray once its transmittance is below this (0 = march every sample)."""
     eval_segment_samples: int = 128

@@ -395,7 +395,7 @@ def test_dense_table_lookup_is_the_factored_lookup(cls: type, reso: list[int]) -
     assert summed.shape == (400, 1) and projected.shape == (400, 5)
     torch.testing.assert_close(summed, feats.sum(dim=-1, keepdim=True), atol=1e-12, rtol=0)
     torch.testing.assert_close(projected, feats @ weight.T, atol=1e-12, rtol=0)
-    with torch.no_grad():  # renders bake slab by slab and read one-channel tables through grid_sample
+    with torch.no_grad():  # renders bake slab by slab
         rendered = interp_volume(grid.dense(planes, lines), reso, xyz)
         rendered_projected = interp_volume(grid.dense(planes, lines, weight), reso, xyz)
     torch.testing.assert_close(rendered, summed.detach(), atol=1e-12, rtol=0)
@@ -517,3 +517,22 @@ def test_summed_vm_table_backward_passes_gradcheck(reso: list[int]) -> None:
         return grid.dense(list(factors[:3]), list(factors[3:]))
 
     assert torch.autograd.gradcheck(table, tuple(params))
+
+
+@pytest.mark.parametrize("channels", [1, 4])
+def test_interp_volume_is_grid_samples_trilinear_lookup(channels: int) -> None:
+    """The 8-corner gather reads a [Z·Y·X, D] table exactly as ``grid_sample`` reads the [D, Z, Y, X] volume
+    (align_corners=True, border clamping), inside the box and outside it."""
+    reso = [5, 4, 3]
+    g = torch.Generator().manual_seed(6)
+    table = torch.randn(reso[0] * reso[1] * reso[2], channels, generator=g, dtype=torch.float64)
+    xyz = torch.rand(200, 3, generator=g, dtype=torch.float64) * 2.6 - 1.3
+    volume = table.T.reshape(1, channels, reso[2], reso[1], reso[0])
+    expected = (
+        torch.nn.functional.grid_sample(
+            volume, xyz.view(1, -1, 1, 1, 3), mode="bilinear", align_corners=True, padding_mode="border"
+        )
+        .view(channels, -1)
+        .T
+    )
+    torch.testing.assert_close(interp_volume(table, reso, xyz), expected, atol=1e-12, rtol=0)

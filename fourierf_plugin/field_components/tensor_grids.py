@@ -147,12 +147,10 @@ def interp_volume(table: Tensor, reso: Sequence[int], xyz: Tensor) -> Tensor:
     at normalised points [N, 3] in [-1, 1]³ (align_corners=True, border-clamped), -> [N, D].
 
     A VM or CP grid is exactly this lookup of its ``dense`` table: the plane's bilinear and the line's linear weights
-    multiply into the trilinear ones, and every axis uses the same vertices for planes and lines.
+    multiply into the trilinear ones, and every axis uses the same vertices for planes and lines. One
+    ``embedding_bag`` of the 8 corners, also for one-channel tables without gradients: on CPU it is ~3x faster than
+    ``grid_sample``'s 3-D kernel (300k points into P-CPU's final grid: 17 vs 57 ms).
     """
-    differentiable = torch.is_grad_enabled() and table.requires_grad
-    if table.shape[1] == 1 and not differentiable:  # grid_sample's fused 3-D kernel: ~3x faster than 8 gathers
-        volume, points = table.view(1, 1, reso[2], reso[1], reso[0]), xyz.view(1, -1, 1, 1, 3)
-        return F.grid_sample(volume, points, mode="bilinear", align_corners=True, padding_mode="border").view(-1, 1)
     axes = [axis_corners(xyz[:, a], reso[a]) for a in range(3)]
     columns, weights = corner_lookup(axes, (1, reso[0], reso[0] * reso[1]), table.shape[0])
     return _GatherLookup.apply(table, columns, weights.to(table.dtype))

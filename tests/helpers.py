@@ -136,3 +136,12 @@ def rays_through_the_slab(n: int = 64) -> tuple[torch.Tensor, torch.Tensor]:
     origins = torch.cat([torch.rand(n, 2, generator=g) - 0.5, torch.full((n, 1), -3.0)], dim=-1)
     directions = torch.cat([(torch.rand(n, 2, generator=g) - 0.5) * 0.2, torch.ones(n, 1)], dim=-1)
     return origins, directions / directions.norm(dim=-1, keepdim=True)
+
+
+def accumulate_rays(weights: torch.Tensor, values: torch.Tensor) -> torch.Tensor:
+    """Dense [R, N] weights and [R, N, C] values through the packed ``accumulate`` (every sample listed)."""
+    from fourierf_plugin.model_components.rendering import accumulate
+
+    num_rays, num_samples = weights.shape
+    rays = torch.arange(num_rays).repeat_interleave(num_samples)
+    return accumulate(weights.reshape(-1), values.reshape(-1, values.shape[-1]), rays, num_rays)

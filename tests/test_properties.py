@@ -17,11 +17,11 @@ from hypothesis import strategies as st
 from fourierf_plugin.field_components.fourier import filter_lines, filter_planes, line_mask, plane_mask
 from fourierf_plugin.model_components.ray_sampling import ray_box_span, sample_deltas, step_samples
 from fourierf_plugin.model_components.rendering import (
-    accumulate,
     blend_background,
     composite_weights,
     expected_depth,
 )
+from tests.helpers import accumulate_rays
 
 PROPERTY = settings(max_examples=40, deadline=None)
 sizes = st.integers(1, 13)
@@ -203,7 +203,7 @@ def test_weights_bounded_and_transmittance_monotone_on_sampler_rays(
 
     gen = torch.Generator().manual_seed(seed)
     colors, background = torch.rand(8, 64, 3, generator=gen).double(), torch.rand(8, 3, generator=gen).double()
-    rgb = blend_background(accumulate(w, colors), acc, background)
+    rgb = blend_background(accumulate_rays(w, colors), acc, background)
     assert bool(((rgb >= -1e-6) & (rgb <= 1.0 + 1e-6)).all())
     depth = expected_depth(w, t, torch.full_like(acc, FAR))
     assert bool((depth >= t[:, 0].clamp(max=FAR) - 1e-6).all()) and bool(

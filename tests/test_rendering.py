@@ -15,6 +15,7 @@ from fourierf_plugin.model_components.rendering import (
     composite_weights,
     expected_depth,
 )
+from tests.helpers import accumulate_rays
 
 
 def _naive_weights64(sigma: torch.Tensor, deltas: torch.Tensor, scale: float) -> torch.Tensor:
@@ -106,7 +107,7 @@ def test_huge_sigma_long_ray_finite_weights_and_gradients() -> None:
     assert torch.isfinite(w).all() and ((w >= 0) & (w <= 1)).all()
     assert (w.sum(dim=-1) <= 1.0 + 1e-6).all()
     colors = torch.rand(4, 2000, 3, generator=gen)
-    (accumulate(w, colors).sum() + w.sum()).backward()
+    (accumulate_rays(w, colors).sum() + w.sum()).backward()
     assert torch.isfinite(sigma.grad).all()
     # Opaque everywhere: all the weight sits on the first sample.
     opaque = composite_weights(torch.full((1, 2000), 1e4), deltas[:1], 25.0)
@@ -128,7 +129,7 @@ def test_zero_density_gives_zero_weights_and_exact_background() -> None:
     colors = torch.rand(5, 300, 3)
     acc = w.sum(dim=-1)
     for bg in (torch.tensor([0.2, 0.5, 0.9]), torch.rand(5, 3)):
-        out = blend_background(accumulate(w, colors), acc, bg)
+        out = blend_background(accumulate_rays(w, colors), acc, bg)
         assert torch.equal(out, bg.expand(5, 3))
 
 
@@ -140,7 +141,7 @@ def test_last_delta_zero_contributes_nothing() -> None:
 def test_accumulate_and_blend() -> None:
     w = torch.tensor([[0.5, 0.25, 0.0]])
     colors = torch.tensor([[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]])
-    rgb = accumulate(w, colors)
+    rgb = accumulate_rays(w, colors)
     torch.testing.assert_close(rgb, torch.tensor([[0.5, 0.25, 0.0]]))
     out = blend_background(rgb, w.sum(dim=-1), torch.ones(3))
     torch.testing.assert_close(out, torch.tensor([[0.75, 0.5, 0.25]]))
@@ -184,7 +185,7 @@ def test_composite_target_matches_a_rendered_pixel() -> None:
     w = composite_weights(torch.tensor([[tau, 0.0]]), torch.tensor([[1.0, 0.0]]))
     colors = torch.tensor([[[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]])
     bg = torch.tensor([0.0, 0.0, 1.0])
-    pred = blend_background(accumulate(w, colors), w.sum(dim=-1), bg)
+    pred = blend_background(accumulate_rays(w, colors), w.sum(dim=-1), bg)
     target = composite_target(torch.tensor([[0.5, 0.0, 0.0, 0.5]]), bg)
     torch.testing.assert_close(pred, target)
 
@@ -201,3 +202,12 @@ def test_background_color_kinds() -> None:
     assert background_color("random", 2, cpu, None).shape == (2, 3)
     with pytest.raises(ValueError, match="unknown background"):
         background_color("grey", 4, cpu, None)
+
+
+def test_accumulate_lists_only_the_samples_that_carry_colour() -> None:
+    """Packed samples of three rays, one ray with none listed: its sum is 0; the others add up per ray."""
+    weights = torch.tensor([0.5, 0.25, 0.1, 0.4])
+    values = torch.tensor([[1.0, 0.0], [0.0, 1.0], [2.0, 2.0], [1.0, 1.0]])
+    rays = torch.tensor([0, 0, 2, 2])
+    out = accumulate(weights, values, rays, num_rays=3)
+    torch.testing.assert_close(out, torch.tensor([[0.5, 0.25], [0.0, 0.0], [0.6, 0.6]]))

@@ -24,9 +24,13 @@ def composite_weights(sigma: Tensor, deltas: Tensor, distance_scale: float = 1.0
     return alpha * transmittance
 
 
-def accumulate(weights: Tensor, values: Tensor) -> Tensor:
-    """Weighted sum along the ray: [R, N] x [R, N, C] -> [R, C]."""
-    return torch.einsum("rn,rnc->rc", weights, values)
+def accumulate(weights: Tensor, values: Tensor, rays: Tensor, num_rays: int) -> Tensor:
+    """Weighted sum per ray of packed samples: ``out[r] = Σ_{k: rays[k] = r} weights[k] · values[k]`` -> [R, C].
+
+    Only samples that carry a value need to be listed (the model passes its shaded ones; the rest have colour 0),
+    so no [R, N, C] tensor of mostly zeros is built.
+    """
+    return values.new_zeros(num_rays, values.shape[-1]).index_add(0, rays, weights.unsqueeze(-1) * values)
 
 
 def blend_background(rgb: Tensor, accumulation: Tensor, background: Tensor) -> Tensor:

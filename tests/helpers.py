@@ -17,6 +17,7 @@ from fourierf_plugin.data.dataparser_base import SceneDeclaration
 from fourierf_plugin.data.parsers.llff import LLFF_DECLARATION, NDC_BOX
 from fourierf_plugin.engine.trainer import Trainer, TrainerConfig
 from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig
+from fourierf_plugin.model_components.rendering import accumulate
 from fourierf_plugin.models.fourierf import FourieRFModel, FourieRFModelConfig
 from fourierf_plugin.scripts.train import parse_args
 
@@ -140,8 +141,6 @@ def rays_through_the_slab(n: int = 64) -> tuple[torch.Tensor, torch.Tensor]:
 
 def accumulate_rays(weights: torch.Tensor, values: torch.Tensor) -> torch.Tensor:
     """Dense [R, N] weights and [R, N, C] values through the packed ``accumulate`` (every sample listed)."""
-    from fourierf_plugin.model_components.rendering import accumulate
-
     num_rays, num_samples = weights.shape
     rays = torch.arange(num_rays).repeat_interleave(num_samples)
     return accumulate(weights.reshape(-1), values.reshape(-1, values.shape[-1]), rays, num_rays)

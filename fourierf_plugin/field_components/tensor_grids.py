@@ -180,7 +180,7 @@ def interp_lines(line: Factor, coord: Tensor, gather: bool | None = None) -> Ten
 
 
 class _SummedVMTable(torch.autograd.Function):
-    """The summed VM table [Z, Y·X] (``dense`` with no projection: training's density) with a hand-written backward.
+    """The summed VM table [Z, Y·X] (``dense`` with no projection: the density) with a hand-written backward.
 
     Why: autograd's backward of the same products runs MKL on transposed views, ~5x slower for these shapes, and
     keeps full-size intermediates; here every product reads contiguous operands and writes one [Z, Y, X] table.
@@ -298,23 +298,21 @@ class TensorVM(TensorGrid):
         ]
 
     def dense(self, planes: Sequence[Tensor], lines: Sequence[Tensor], weight: Tensor | None = None) -> Tensor:
-        inputs = [*planes, *lines] + ([weight] if weight is not None else [])
-        if not (torch.is_grad_enabled() and any(t.requires_grad for t in inputs)):
-            return self._dense_by_slab(planes, lines, weight)
-        if weight is None:
+        if weight is None:  # the summed table (density), with or without gradients
             return _SummedVMTable.apply(*planes, *lines)
-        return self._dense_in_layout(planes, lines, weight)
+        if torch.is_grad_enabled() and any(t.requires_grad for t in (*planes, *lines, weight)):
+            return self._dense_in_layout(planes, lines, weight)
+        return self._dense_by_slab(planes, lines, weight)
 
-    def _dense_in_layout(self, planes: Sequence[Tensor], lines: Sequence[Tensor], weight: Tensor | None) -> Tensor:
-        """``dense`` with autograd: each group's product computed straight in the table's [Z, Y, X, D] layout.
+    def _dense_in_layout(self, planes: Sequence[Tensor], lines: Sequence[Tensor], weight: Tensor) -> Tensor:
+        """``dense`` of a projection with autograd: each group's product straight in the table's [Z, Y, X, D] layout.
 
         Why: a product per group in its own axis order, permuted and summed, copies the full table once more per
         group forwards and again backwards; here A and C are one matrix product each and B one batched product.
         Plane/line pairs by ``MAT_MODES``/``VEC_MODES``: A = (xy, z), B = (xz, y), C = (yz, x).
         """
         (plane_a, plane_b, plane_c), (line_a, line_b, line_c) = planes, lines
-        widths = [p.shape[0] for p in planes]
-        proj = [_projection(weight, sum(widths[:i]), c, planes[i]).T for i, c in enumerate(widths)]  # [C_i, D]
+        widths, proj = _group_projections(planes, weight)
         nz = self.resolution[2]
         d = proj[0].shape[1]
         plane_b_proj = (plane_b.unsqueeze(-1) * proj[1][:, None, None, :]).transpose(0, 1).reshape(nz, widths[1], -1)
@@ -325,21 +323,18 @@ class TensorVM(TensorGrid):
             torch.matmul(line_b.T, plane_b_proj), plane_c.permute(1, 2, 0), line_c_proj.expand(nz, -1, -1)
         ).reshape(nz, -1)
         rows_a = plane_a.reshape(widths[0], -1)  # [C, Y·X]
-        if d == 1:  # A: [Z, C] @ [C, Y·X], added in place; the left factor made contiguous (its transposed view is
-            return torch.addmm(part_bc, (line_a * proj[0]).T.contiguous(), rows_a).reshape(-1, 1)  # 5x slower)
         part_a = torch.matmul(rows_a.T, line_a.T.unsqueeze(-1) * proj[0].unsqueeze(0))  # [Z, Y·X, D]
         return (part_bc + part_a.reshape(nz, -1)).reshape(-1, d)
 
-    def _dense_by_slab(self, planes: Sequence[Tensor], lines: Sequence[Tensor], weight: Tensor | None) -> Tensor:
-        """``dense`` without gradients, one z-slab of the table at a time.
+    def _dense_by_slab(self, planes: Sequence[Tensor], lines: Sequence[Tensor], weight: Tensor) -> Tensor:
+        """``dense`` of a projection without gradients, one z-slab of the table at a time.
 
         Why: a render's appearance table is hundreds of MB; building each group's full-size product, permuting it and
         summing writes it ~5 times over, while a slab's three products stay in cache and land in the table directly.
         Plane/line pairs by ``MAT_MODES``/``VEC_MODES``: A = (xy, z), B = (xz, y), C = (yz, x).
         """
         (plane_a, plane_b, plane_c), (line_a, line_b, line_c) = planes, lines
-        widths = [p.shape[0] for p in planes]
-        proj = [_projection(weight, sum(widths[:i]), c, planes[i]).T for i, c in enumerate(widths)]  # [C_i, D]
+        widths, proj = _group_projections(planes, weight)
         nx, ny, nz = self.resolution
         d = proj[0].shape[1]
         table = plane_a.new_empty(nz, ny * nx, d)
@@ -379,6 +374,12 @@ class TensorCP(TensorGrid):
         zy = (lines[2].unsqueeze(2) * lines[1].unsqueeze(1)).reshape(c, -1)  # [C, R2·R1]
         out = zy.T @ (lines[0].unsqueeze(-1) * w.T.unsqueeze(1)).reshape(c, -1)  # [R2·R1, R0·D]
         return out.reshape(-1, w.shape[0])
+
+
+def _group_projections(planes: Sequence[Tensor], weight: Tensor) -> tuple[list[int], list[Tensor]]:
+    """Each VM group's component count and its slice of the projection, transposed to [C_i, D]."""
+    widths = [p.shape[0] for p in planes]
+    return widths, [_projection(weight, sum(widths[:i]), c, planes[i]).T for i, c in enumerate(widths)]
 
 
 def _projection(weight: Tensor | None, offset: int, count: int, like: Tensor) -> Tensor:

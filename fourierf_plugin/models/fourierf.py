@@ -205,14 +205,16 @@ class FourieRFModel(nn.Module):
             # Samples are addressed by flat indices into [R·N] from here on: boolean masks would run a nonzero
             # pass at every use (indexing, index_put and their backward), ~3x the cost of one index_select each.
             points = xyz.view(-1, 3)
-            valid = inside.view(-1).nonzero().squeeze(1)
-            if self.occupancy.active and valid.numel() and not march_to_opacity:
-                valid = valid[self.occupancy.query(points.index_select(0, valid))]
+            if not march_to_opacity:  # (the early-terminated march checks occupancy itself, for live rays only)
+                valid, valid_points = self._occupied(points, inside.view(-1).nonzero().squeeze(1))
         with phase("density"):
-            if march_to_opacity:  # queries the occupancy grid itself, for the rays still alive only
+            if march_to_opacity:
                 sigma = self._density_until_opaque(xyz, inside, deltas)
             else:
-                sigma = self._density_at(points, valid).view(num_rays, num_samples)
+                sigma = points.new_zeros(num_rays * num_samples)
+                if valid.numel():
+                    sigma = sigma.index_put((valid,), self.field.density(valid_points))
+                sigma = sigma.view(num_rays, num_samples)
         grad_scale = floaters_scale(t) if self.config.floaters_gradient_scaling and training else None
         if grad_scale is not None:
             sigma = scale_gradient(sigma, grad_scale)
@@ -252,12 +254,14 @@ class FourieRFModel(nn.Module):
             parts.append(part)
         return torch.cat(parts)
 
-    def _density_at(self, points: Tensor, index: Tensor) -> Tensor:
-        """σ [M] for M flat sample points [M, 3]: the field at the listed ``index`` rows, 0 elsewhere."""
-        sigma = points.new_zeros(points.shape[0])
-        if index.numel():
-            sigma = sigma.index_put((index,), self.field.density(points.index_select(0, index)))
-        return sigma
+    def _occupied(self, points: Tensor, index: Tensor) -> tuple[Tensor, Tensor]:
+        """The listed samples (flat ``index`` into ``points``) that lie in occupied cells: their indices and points."""
+        selected = points.index_select(0, index)
+        if not self.occupancy.active or not index.numel():
+            return index, selected
+        with phase("sampling"):
+            keep = self.occupancy.query(selected).nonzero().squeeze(1)
+        return index.index_select(0, keep), selected.index_select(0, keep)
 
     def _density_until_opaque(self, xyz: Tensor, inside: Tensor, deltas: Tensor) -> Tensor:
         """σ [R, N] marched in segments; a ray stops being queried once its transmittance falls below
@@ -277,12 +281,10 @@ class FourieRFModel(nn.Module):
             live = (inside[:, cols] & alive.unsqueeze(-1)).view(-1).nonzero().squeeze(1)  # flat in [R, width]
             width = min(segment, num_samples - start)
             index = live.div(width, rounding_mode="floor") * num_samples + (live % width + start)  # flat in [R, N]
-            if self.occupancy.active and index.numel():
-                with phase("sampling"):
-                    index = index[self.occupancy.query(points.index_select(0, index))]
+            index, selected = self._occupied(points, index)
             if not index.numel():
                 continue
-            sigma.view(-1).index_put_((index,), self.field.density(points.index_select(0, index)))
+            sigma.view(-1).index_put_((index,), self.field.density(selected))
             depth = depth + (sigma[:, cols] * deltas[:, cols]).sum(dim=-1) * self.config.distance_scale
         return sigma
 

@@ -12,7 +12,7 @@ figures: its AdamW has weight decay hard-coded to 0 and FourieRF no learning-rat
 decays to 0.1 without weight decay. "preset" is each method's preset unchanged (the paper's weight decay 0.2, lr decay
 0.1). Everything else (curriculum f0 0.3 opening over 20 % of the run, decoder, losses) is the preset's in both.
 
-    python benchmarks/pcpu_speed.py                 # 3 seeds per method, about 20 minutes on 2 cores
+    python benchmarks/pcpu_speed.py                 # 3 seeds per method and setting, about 40 minutes on 2 cores
     python benchmarks/pcpu_speed.py --report-only   # rebuild the BENCHMARKS.md section from finished runs
 
 Finished runs (results.jsonl) and the phase breakdown (phases.json) are kept: delete a line or the file to re-time.
@@ -111,6 +111,7 @@ def main() -> None:
     if not (scene / "transforms_train.json").is_file():
         sys.exit(f"error: {scene} not found; pass --shared PATH_TO_SHARED")
     args.work.mkdir(parents=True, exist_ok=True)
+    lpips = args.shared / "lpips/lpips_alex_v0.1.pth"
     methods = ("fourierf-vm", "tensorf-vm")
     plan = [Run(m, 800, s, label) for label in SETTINGS for s in args.seeds for m in methods]
     if args.report_only:
@@ -119,7 +120,6 @@ def main() -> None:
 
     def execute(run: Run) -> dict:
         parser = ["blender-data", "--downscale", "4", "--test-every", "8", "--view-ids", *VIEWS]
-        lpips = args.shared / "lpips/lpips_alex_v0.1.pth"
         extra = ["--profile-phases", "True", *SETTINGS[run.views][1][run.method]]
         return train_and_eval(run, scene, parser, args.work, lpips, "lego", extra=extra)
 
@@ -127,7 +127,7 @@ def main() -> None:
     missing = [row for row in results.values() if "val_psnr" not in row]
     for row in missing:  # the val split shows the settings' ranking without the test views
         print(f"validating {row['key']} ...", flush=True)
-        row |= evaluate(Path(row["run_dir"]), row["key"], args.work, args.shared / "lpips/lpips_alex_v0.1.pth", "val")
+        row |= evaluate(Path(row["run_dir"]), row["key"], args.work, lpips, split="val")
     if missing:
         save_results(args.work / "results.jsonl", load_results(args.work / "results.jsonl") | results)
     for row in results.values():  # from the runs' logs, so --report-only recomputes them

@@ -1,7 +1,8 @@
-"""Time one training iteration phase by phase on a saved state, for any checkout of fourierf (before/after a change).
+"""Time one training iteration phase by phase on a saved state, for a checkout of fourierf (before/after a change).
 
 The phases are measured from outside, by wrapping the pipeline's public pieces, so the same harness runs on code
-that has no phase markers of its own (an older commit passed as ``--code-dir``):
+that has no phase markers of its own (an older commit passed as ``--code-dir``: one that reads the run's config
+format, i.e. the redesign of issue 16 or later):
 
     data (next_batch) · prepare (model.prepare: Fourier filtering + dense tables) · density (field.density) ·
     appearance (field.rgb) · sampling+compositing (the rest of the model's forward) · losses ·
@@ -64,20 +65,18 @@ def main() -> None:
         sys.path.insert(0, str(args.code_dir.resolve()))
     import torch
 
+    from fourierf_plugin.accel.allocator import keep_freed_memory
     from fourierf_plugin.configs.base import load_config
     from fourierf_plugin.engine.checkpoint import load_latest_checkpoint
+    from fourierf_plugin.engine.machine import seed_everything
     from fourierf_plugin.engine.optimizers import build_optimizer
-    from fourierf_plugin.engine.trainer import TrainerConfig, seed_everything
+    from fourierf_plugin.engine.trainer import TrainerConfig
+    from fourierf_plugin.method_configs import config_registry
 
     if args.threads:
         torch.set_num_threads(args.threads)
-    try:  # what the console scripts of this checkout do at start-up (older checkouts have no allocator tuning)
-        from fourierf_plugin.utils.allocator import keep_freed_memory
-
-        keep_freed_memory()
-    except ImportError:
-        pass
-    config = load_config(_config_for(args.run_dir / "config.json", TrainerConfig), TrainerConfig)
+    keep_freed_memory()  # what the console scripts do at start-up
+    config = load_config(_config_for(args.run_dir / "config.json", TrainerConfig), TrainerConfig, config_registry())
     pipeline = config.pipeline.setup(
         device=torch.device("cpu"), max_iters=config.max_num_iterations, generator=seed_everything(config.seed)
     )

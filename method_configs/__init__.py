@@ -1,40 +1,10 @@
-"""Method presets, installed as ``fourierf_plugin.method_configs``.
+"""Method presets and the layer that finishes a config, installed as ``fourierf_plugin.method_configs``.
 
-``all_methods`` maps a CLI subcommand to a complete :class:`TrainerConfig`. Third-party methods join through the
-``fourierf.method_configs`` entry-point group; each entry point names a ``(TrainerConfig, description)`` pair.
+``presets`` holds the built-in methods, ``registry`` adds the installed plugins' and builds the CLI's subcommands,
+``finalize`` turns what a user typed into the config a trainer takes (scene preset, scene effects).
 """
 
-from __future__ import annotations
+from fourierf_plugin.method_configs.finalize import config_registry, finalize, resume_config
+from fourierf_plugin.method_configs.registry import AnnotatedMethodUnion, all_descriptions, all_methods
 
-from importlib.metadata import entry_points
-
-import tyro
-
-from fourierf_plugin.engine.trainer import TrainerConfig
-from fourierf_plugin.method_configs.presets import (
-    descriptions,
-    fourierf_cp,
-    fourierf_vm,
-    fourierf_vm_code,
-    tensorf_cp,
-    tensorf_vm,
-)
-
-all_methods: dict[str, TrainerConfig] = {
-    "fourierf-vm": fourierf_vm,
-    "fourierf-cp": fourierf_cp,
-    "fourierf-vm-code": fourierf_vm_code,
-    "tensorf-vm": tensorf_vm,
-    "tensorf-cp": tensorf_cp,
-}
-all_descriptions: dict[str, str] = dict(descriptions)
-
-for _ep in entry_points(group="fourierf.method_configs"):
-    _spec = _ep.load()
-    if isinstance(_spec, tuple) and len(_spec) == 2 and isinstance(_spec[0], TrainerConfig):
-        all_methods.setdefault(_ep.name, _spec[0])
-        all_descriptions.setdefault(_ep.name, str(_spec[1]))
-
-AnnotatedMethodUnion = tyro.conf.SuppressFixed[
-    tyro.conf.FlagConversionOff[tyro.extras.subcommand_type_from_defaults(all_methods, all_descriptions)]  # type: ignore[arg-type]
-]
+__all__ = ["AnnotatedMethodUnion", "all_descriptions", "all_methods", "config_registry", "finalize", "resume_config"]

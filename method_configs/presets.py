@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+from fourierf_plugin.data.scene_effects import EffectsConfig
 from fourierf_plugin.engine.optimizers import OptimizerConfig
 from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig
@@ -37,20 +38,25 @@ def _cp_model(fourier: bool) -> FourieRFModelConfig:
 
 def _code_vm_model() -> FourieRFModelConfig:
     """The official code's shipped behaviour (spec §4.7, §8): f0 0.01 ramped over the whole run, out-of-band plane
-    coefficients kept at 1e-6, appearance planes filtered with the density cutoff, a view-dependent (SH) decoder."""
+    coefficients kept at 1e-6, appearance planes filtered with the density cutoff (and, in its preset, a view-dependent
+    SH decoder)."""
     return FourieRFModelConfig(
         field=FieldConfig(decomposition="vm"),
         fourier=FourierConfig(
             f0_density=0.01, f0_color=0.01, ramp_fraction=1.0, plane_leakage=1e-6, app_planes_follow_density=True
         ),
-        view_dependent=True,
     )
 
 
-def _trainer(name: str, model: FourieRFModelConfig, optimizer: OptimizerConfig | None = None) -> TrainerConfig:
+def _trainer(
+    name: str,
+    model: FourieRFModelConfig,
+    optimizer: OptimizerConfig | None = None,
+    effects: EffectsConfig | None = None,
+) -> TrainerConfig:
     return TrainerConfig(
         method_name=name,
-        pipeline=replace(PipelineConfig(), model=model),
+        pipeline=replace(PipelineConfig(), model=model, effects=effects or EffectsConfig()),
         optimizer=optimizer or OptimizerConfig(),
     )
 
@@ -58,7 +64,10 @@ def _trainer(name: str, model: FourieRFModelConfig, optimizer: OptimizerConfig |
 fourierf_vm = _trainer("fourierf-vm", _vm_model(fourier=True))
 fourierf_cp = _trainer("fourierf-cp", _cp_model(fourier=True))
 fourierf_vm_code = _trainer(
-    "fourierf-vm-code", _code_vm_model(), OptimizerConfig(betas=(0.9, 0.99), weight_decay=0.0, lr_decay_ratio=1.0)
+    "fourierf-vm-code",
+    _code_vm_model(),
+    OptimizerConfig(betas=(0.9, 0.99), weight_decay=0.0, lr_decay_ratio=1.0),
+    EffectsConfig(view_dependent=True),
 )
 tensorf_vm = _trainer("tensorf-vm", _vm_model(fourier=False))
 tensorf_cp = _trainer("tensorf-cp", _cp_model(fourier=False))

@@ -1,11 +1,13 @@
-"""Shared fixtures: the ../shared material (skipped outside CI when absent, a failure in CI) and tiny scenes."""
+"""Shared fixtures: the ../shared material (skipped outside CI when absent, a failure in CI) and the torch threads."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+import torch
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SHARED_DIR = Path(os.environ.get("FOURIERF_SHARED", REPO_ROOT.parent / "shared"))
@@ -25,3 +27,16 @@ def require_shared(*parts: str) -> Path:
 @pytest.fixture
 def shared_dir() -> Path:
     return require_shared()
+
+
+@pytest.fixture(scope="session", autouse=True)
+def single_torch_thread() -> Iterator[None]:
+    """One torch thread per test process, restored afterwards.
+
+    Why: ``make test`` runs two pytest workers on a two-core machine; with torch's default threads each would
+    oversubscribe the cores (a 5 s tiny run took 20 s), and tiny grids gain nothing from a second thread anyway.
+    """
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)

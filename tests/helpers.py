@@ -7,19 +7,21 @@ scene or of a flag name should be fixed once, not in five files.
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 import torch
 
-from fourierf_plugin.data.dataparser_base import SceneDeclaration
+from fourierf_plugin.data.parsers.blender import BLENDER_DECLARATION
 from fourierf_plugin.data.parsers.llff import LLFF_DECLARATION, NDC_BOX
+from fourierf_plugin.data.scene_effects import SceneEffects
 from fourierf_plugin.engine.trainer import Trainer, TrainerConfig
 from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig
 from fourierf_plugin.model_components.rendering import accumulate
 from fourierf_plugin.models.fourierf import FourieRFModel, FourieRFModelConfig
-from fourierf_plugin.scripts.train import parse_args
+from fourierf_plugin.scripts.cli import run_cli
+from fourierf_plugin.scripts.train import build_config, parse_args
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 TINY_SCENE = REPO_ROOT / "demo" / "lego_tiny"
@@ -61,8 +63,9 @@ def tiny_args(
 def tiny_trainer_config(
     output_dir: Path, method: str = "fourierf-vm", iters: int = 30, extra: list[str] | None = None
 ) -> TrainerConfig:
-    """The parsed config of a tiny run (built through the real CLI parser)."""
-    return parse_args(tiny_args(output_dir, method, iters, extra))
+    """The finished config of a tiny run (built through the real CLI parser and ``finalize``)."""
+    config, _ = build_config(parse_args(tiny_args(output_dir, method, iters, extra)))
+    return config
 
 
 def train_tiny(
@@ -74,40 +77,47 @@ def train_tiny(
     return trainer, run_dir
 
 
+def cli_exit_code(main: Callable[[list[str]], object], args: list[str]) -> int:
+    """Run a console script's ``main(args)`` the way its entry point does (under ``run_cli``) and return the exit
+    code it ends with; a run that ends without exiting fails the test."""
+    with pytest.raises(SystemExit) as info:
+        run_cli(lambda: main(args), args)
+    return info.value.code
+
+
+class FakeClock:
+    """A clock that stands still until told (``clock.now += 2``), to monkeypatch over ``time.perf_counter``; it
+    counts how often it was read."""
+
+    def __init__(self, now: float = 1000.0) -> None:
+        self.now = now
+        self.reads = 0
+
+    def __call__(self) -> float:
+        self.reads += 1
+        return self.now
+
+
 def venv_script(name: str) -> Path:
     """An installed console script of the interpreter running the tests (``.venv/bin/fourierf-train``)."""
     return Path(sys.executable).parent / name
 
 
-@pytest.fixture(scope="module", autouse=True)
-def single_torch_thread() -> Iterator[None]:
-    """One torch thread while a module's tiny runs train, restored afterwards.
-
-    Why: on a small shared machine (two cores, a benchmark or a second pytest worker beside us) OpenMP threads
-    oversubscribe and a 5 s tiny run takes 20 s; tiny grids gain nothing from a second thread anyway.
-    Import it into a test module (``from tests.helpers import single_torch_thread``) to apply it there.
-    """
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
-def ndc_model(config: FourieRFModelConfig, max_iters: int = 100) -> FourieRFModel:
-    """A model on the LLFF NDC box with the LLFF declaration (seeded), for NDC sampler and effects tests."""
+def ndc_model(
+    config: FourieRFModelConfig, max_iters: int = 100, effects: SceneEffects = LLFF_DECLARATION
+) -> FourieRFModel:
+    """A model on the LLFF NDC box with the LLFF effects (seeded), for NDC sampler and effects tests."""
     return config.setup(
         scene_box=torch.tensor(NDC_BOX),
         near=0.0,
         far=1.0,
-        declaration=LLFF_DECLARATION,
+        effects=effects,
         max_iters=max_iters,
         generator=torch.Generator().manual_seed(0),
     )
 
 
-BLENDER = SceneDeclaration(
-    background="white", ray_space="euclidean", bounded=True, view_dependent=False, occlusion_regularization=False
-)
+BLENDER = BLENDER_DECLARATION
 
 
 def slab_model(slab_density: float, **config) -> FourieRFModel:
@@ -118,7 +128,7 @@ def slab_model(slab_density: float, **config) -> FourieRFModel:
     )  # fmt: skip
     torch.manual_seed(0)  # the decoder's layers draw from the global generator
     model = FourieRFModelConfig(field=field, **config).setup(
-        scene_box=torch.tensor([[-1.5] * 3, [1.5] * 3]), near=0.5, far=6.0, declaration=BLENDER, max_iters=10,
+        scene_box=torch.tensor([[-1.5] * 3, [1.5] * 3]), near=0.5, far=6.0, effects=BLENDER, max_iters=10,
         generator=torch.Generator().manual_seed(0),
     )  # fmt: skip
     grid = model.field.density_grid

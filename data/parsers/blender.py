@@ -16,10 +16,10 @@ from fourierf_plugin.data.dataparser_base import (
     DataParser,
     DataParserConfig,
     DataparserOutputs,
-    SceneDeclaration,
     Split,
 )
 from fourierf_plugin.data.images import load_images
+from fourierf_plugin.data.scene_effects import SceneDeclaration
 from fourierf_plugin.data.view_selection import explicit_views, kmeans_views
 from fourierf_plugin.utils.errors import fail
 
@@ -106,10 +106,19 @@ def _image_path(data: Path, file_path: str) -> Path:
     return path.with_name(path.name + ".png") if not path.suffix else path
 
 
+BLENDER_DECLARATION = SceneDeclaration(
+    background="white", ray_space="euclidean", bounded=True, view_dependent=False, occlusion_regularization=False
+)
+"""Rendered RGBA objects: a white background, euclidean rays in a bounded box; too few views for view dependence."""
+
+
 class BlenderDataParser(DataParser):
     """Reads a NeRF-synthetic scene: OpenGL camera-to-world matrices and RGBA images composited on white."""
 
     config: BlenderDataParserConfig
+
+    def declaration(self) -> SceneDeclaration:
+        return BLENDER_DECLARATION
 
     def _check_config(self) -> None:
         cfg = self.config
@@ -168,13 +177,6 @@ class BlenderDataParser(DataParser):
             scene_box=torch.tensor([[-b, -b, -b], [b, b, b]], dtype=torch.float32),
             near=cfg.near,
             far=cfg.far,
-            declaration=SceneDeclaration(
-                background="white",
-                ray_space="euclidean",
-                bounded=True,
-                view_dependent=False,
-                occlusion_regularization=False,
-            ),
             scene_name=data.resolve().name,
             source_files=paths,
         )

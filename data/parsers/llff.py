@@ -21,10 +21,10 @@ from fourierf_plugin.data.dataparser_base import (
     DataParser,
     DataParserConfig,
     DataparserOutputs,
-    SceneDeclaration,
     Split,
 )
 from fourierf_plugin.data.images import load_images
+from fourierf_plugin.data.scene_effects import SceneDeclaration
 from fourierf_plugin.data.view_selection import explicit_views, regnerf_views
 from fourierf_plugin.utils.errors import fail
 
@@ -216,7 +216,6 @@ class LLFFDataParser(DataParser):
             scene_box=torch.tensor(NDC_BOX, dtype=torch.float32),
             near=0.0,
             far=1.0,
-            declaration=LLFF_DECLARATION,
             scene_name=data.resolve().name,
             source_files=[files[i] for i in ids],
             depth_bounds=(float(bounds.min()), float(bounds.max())),

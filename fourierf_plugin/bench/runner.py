@@ -15,12 +15,20 @@ import subprocess
 import sys
 import time
 import traceback
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+import torch
+
 from fourierf_plugin.bench import phases as ph
 from fourierf_plugin.bench.sweep import RunSpec
+from fourierf_plugin.engine.checkpoint import checkpoint_name
+from fourierf_plugin.engine.evaluation import evaluate
+from fourierf_plugin.engine.loading import load_run
+from fourierf_plugin.method_configs import config_registry
+from fourierf_plugin.utils.console import write_json
+from fourierf_plugin.utils.lpips import LPIPS, default_lpips_weights
 
 SceneKind = Literal["blender", "llff"]
 
@@ -55,7 +63,6 @@ class RunTask:
     device: str = "auto"
     lpips_weights: Path | None = None
     keep_checkpoints: bool = False
-    profile_supported: bool = True
 
     @property
     def runs_dir(self) -> Path:
@@ -75,13 +82,6 @@ class RunResult:
     error: str | None = None
 
 
-def profile_phases_supported() -> bool:
-    """Whether the installed trainer has ``--profile-phases`` (older ones simply get no breakdown)."""
-    from fourierf_plugin.engine.trainer import TrainerConfig
-
-    return any(f.name == "profile_phases" for f in fields(TrainerConfig))
-
-
 def train_command(task: RunTask) -> list[str]:
     spec = task.spec
     script = Path(sys.executable).parent / "fourierf-train"
@@ -91,7 +91,7 @@ def train_command(task: RunTask) -> list[str]:
     cmd += ["--device", task.device]
     if task.threads is not None:
         cmd += ["--threads", str(task.threads)]
-    if spec.profile_phases and task.profile_supported:
+    if spec.profile_phases:
         cmd += ["--profile-phases", "True"]
     return cmd + task.scene.parser_flags(spec.downscale)
 
@@ -131,14 +131,11 @@ def find_run_dir(task: RunTask) -> Path:
 
 
 def evaluate_checkpoints(task: RunTask, run_dir: Path, steps: tuple[int, ...], log: Path) -> dict[int, dict]:
-    """fourierf-eval's report for each planned step (no images written), its console output going to ``log``."""
-    import torch
-
-    from fourierf_plugin.engine.checkpoint import checkpoint_name
-    from fourierf_plugin.scripts.eval import EvalConfig, evaluate
-
+    """The evaluation report of each planned step (no images written), its console output going to ``log``."""
     if task.threads is not None:
         torch.set_num_threads(task.threads)
+    weights = task.lpips_weights or default_lpips_weights()
+    lpips = LPIPS(weights) if weights is not None else None
     reports = {}
     with log.open("w") as fh, contextlib.redirect_stdout(fh), contextlib.redirect_stderr(fh):
         for step in steps:
@@ -146,15 +143,9 @@ def evaluate_checkpoints(task: RunTask, run_dir: Path, steps: tuple[int, ...], l
             if not ckpt.is_file():
                 raise RuntimeError(f"no checkpoint for step {step} in {run_dir / 'checkpoints'}")
             started = time.perf_counter()
-            cfg = EvalConfig(
-                load_config=run_dir / "config.json",
-                output_path=run_dir / "bench_eval" / f"step-{step:09d}.json",
-                checkpoint=ckpt,
-                lpips_weights=task.lpips_weights,
-                render_dir=Path("none"),
-                device=task.device,  # type: ignore[arg-type]
-            )
-            report = evaluate(cfg)
+            run = load_run(run_dir / "config.json", config_registry(), ckpt, task.device)
+            report = evaluate(run, "test", lpips.to(run.device) if lpips is not None else None)
+            write_json(run_dir / "bench_eval" / f"step-{step:09d}.json", report)
             report["bench_eval_seconds"] = time.perf_counter() - started
             reports[step] = report
     return reports
@@ -162,8 +153,6 @@ def evaluate_checkpoints(task: RunTask, run_dir: Path, steps: tuple[int, ...], l
 
 def prune_checkpoints(run_dir: Path, keep_step: int) -> None:
     """Keep only the final checkpoint once every planned step is evaluated (a sweep would otherwise fill disks)."""
-    from fourierf_plugin.engine.checkpoint import checkpoint_name
-
     for ckpt in (run_dir / "checkpoints").glob("step-*.ckpt"):
         if ckpt.name != checkpoint_name(keep_step):
             ckpt.unlink(missing_ok=True)
@@ -224,7 +213,7 @@ def execute_run(task: RunTask) -> RunResult:
             "wall_seconds": wall,
             "train_seconds": done.get("train_seconds") if done else None,
             "peak_rss_gb": rss,
-            "profiled": spec.profile_phases and task.profile_supported,
+            "profiled": spec.profile_phases,
             "phases_total": ph.phases_total(records),
             "phases_final": ph.phases_final(records, spec.iters),
             "run_dir": str(run_dir),

@@ -11,6 +11,7 @@ import math
 from dataclasses import asdict, dataclass, replace
 from typing import Literal
 
+from fourierf_plugin.method_configs import all_methods
 from fourierf_plugin.utils.errors import fail
 
 KNOBS = ("iters", "downscale", "grid_voxels", "step_ratio", "batch_size", "f0", "ramp_fraction")
@@ -143,15 +144,11 @@ class SweepSpec:
 
 def fourier_defaults(method: str) -> tuple[float, float] | None:
     """(f0, ramp_fraction) of a method preset, or None when its curriculum is off (the TensoRF baselines)."""
-    from fourierf_plugin.method_configs import all_methods
-
     fourier = all_methods[method].pipeline.model.fourier
     return (fourier.f0_density, fourier.ramp_fraction) if fourier.enabled else None
 
 
 def known_methods() -> list[str]:
-    from fourierf_plugin.method_configs import all_methods
-
     return sorted(all_methods)
 
 

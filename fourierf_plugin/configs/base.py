@@ -2,8 +2,10 @@
 
 Every component has a config with a ``_target`` (the class it builds) and ``setup(**runtime_kwargs)``. Runtime
 values (device, scene box, ...) are passed to ``setup`` and never stored, so a saved config is plain data.
-JSON (not pickled YAML) keeps ``config.json`` readable and safe: only registered config classes can be named
-in it, so loading one cannot import or run arbitrary code.
+JSON (not pickled YAML) keeps ``config.json`` readable and safe: a class named in it must be the one a field
+declares or one of the registry the caller passes, so loading one cannot import or run arbitrary code. The registry
+comes from the layer that knows every plugin (``fourierf_plugin.method_configs.config_registry``); this module
+imports none.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import dataclasses
 import json
 import types
 import typing
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, ClassVar, Literal, TypeVar, Union, get_args, get_origin
 
@@ -19,7 +22,8 @@ from fourierf_plugin import __version__
 from fourierf_plugin.utils.errors import fail
 
 C = TypeVar("C", bound="InstantiateConfig")
-CONFIG_FORMAT = 1
+CONFIG_FORMAT = 2
+"""2: scene effects under ``pipeline.effects`` (resolved), speed settings under ``pipeline.model.accel``."""
 
 
 @dataclasses.dataclass
@@ -36,8 +40,8 @@ class InstantiateConfig:
         return target(self, **kwargs)
 
 
-def _registry() -> dict[str, type]:
-    """All config dataclasses by class name (subclasses of InstantiateConfig, recursively)."""
+def config_classes() -> dict[str, type]:
+    """Every config dataclass imported so far, by class name (subclasses of InstantiateConfig, recursively)."""
     found: dict[str, type] = {}
     stack: list[type] = [InstantiateConfig]
     while stack:
@@ -68,7 +72,10 @@ def to_dict(cfg: Any) -> Any:
     raise TypeError(f"cannot store {type(cfg).__name__} in a config: {cfg!r}")
 
 
-def _convert(value: Any, tp: Any, where: str) -> Any:
+Registry = Mapping[str, type]
+
+
+def _convert(value: Any, tp: Any, where: str, registry: Registry) -> Any:
     """Convert JSON data to the annotated type ``tp`` (dataclasses, unions, paths, tuples, literals)."""
     origin = get_origin(tp)
     if tp is Any:
@@ -78,13 +85,13 @@ def _convert(value: Any, tp: Any, where: str) -> Any:
         if value is None and type(None) in options:
             return None
         if isinstance(value, dict) and "_type" in value:
-            return _from_dict(value, where)
+            return _from_dict(value, where, registry)
         errors = []
         for opt in options:
             if opt is type(None):
                 continue
             try:
-                return _convert(value, opt, where)
+                return _convert(value, opt, where, registry)
             except (TypeError, ValueError) as err:
                 errors.append(str(err))
         raise ValueError(f"{where}: {value!r} matches none of {options}: {errors}")
@@ -99,17 +106,18 @@ def _convert(value: Any, tp: Any, where: str) -> Any:
         if origin is tuple and args and args[-1] is not Ellipsis:
             if len(value) != len(args):
                 raise ValueError(f"{where}: expected {len(args)} values, got {len(value)}: {value!r}")
-            return tuple(_convert(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args, strict=True)))
+            pairs = enumerate(zip(value, args, strict=True))
+            return tuple(_convert(v, a, f"{where}[{i}]", registry) for i, (v, a) in pairs)
         item = args[0] if args else Any
-        seq = [_convert(v, item, f"{where}[{i}]") for i, v in enumerate(value)]
+        seq = [_convert(v, item, f"{where}[{i}]", registry) for i, v in enumerate(value)]
         return tuple(seq) if origin is tuple else seq
     if origin is dict:
         _, v_tp = get_args(tp) or (Any, Any)
-        return {k: _convert(v, v_tp, f"{where}.{k}") for k, v in value.items()}
+        return {k: _convert(v, v_tp, f"{where}.{k}", registry) for k, v in value.items()}
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
             raise TypeError(f"{where}: expected an object, got {value!r}")
-        return _from_dict(value, where, default_cls=tp)
+        return _from_dict(value, where, registry, default_cls=tp)
     if tp is Path:
         if not isinstance(value, str):
             raise TypeError(f"{where}: expected a path string, got {value!r}")
@@ -129,8 +137,7 @@ def _convert(value: Any, tp: Any, where: str) -> Any:
     raise TypeError(f"{where}: unsupported annotation {tp!r}")
 
 
-def _from_dict(data: dict[str, Any], where: str, default_cls: type | None = None) -> Any:
-    registry = _registry()
+def _from_dict(data: dict[str, Any], where: str, registry: Registry, default_cls: type | None = None) -> Any:
     name = data.get("_type")
     # Plain nested dataclasses (not InstantiateConfig) are known by their declared type only.
     known_plain = default_cls is not None and name == default_cls.__name__
@@ -150,13 +157,14 @@ def _from_dict(data: dict[str, Any], where: str, default_cls: type | None = None
     for key, value in data.items():
         if key == "_type":
             continue
-        kwargs[key] = _convert(value, hints[key], f"{where}.{key}")
+        kwargs[key] = _convert(value, hints[key], f"{where}.{key}", registry)
     return cls(**kwargs)
 
 
-def from_dict(data: dict[str, Any], expected: type[C] | None = None) -> C:
-    """Rebuild a config tree saved by :func:`to_dict`."""
-    cfg = _from_dict(data, "config", default_cls=expected)
+def from_dict(data: dict[str, Any], expected: type[C] | None = None, registry: Registry | None = None) -> C:
+    """Rebuild a config tree saved by :func:`to_dict`; ``registry`` names the classes it may hold (default: every
+    config class imported so far)."""
+    cfg = _from_dict(data, "config", config_classes() if registry is None else registry, default_cls=expected)
     if expected is not None and not isinstance(cfg, expected):
         raise ValueError(f"config holds a {type(cfg).__name__}, expected {expected.__name__}")
     return cfg
@@ -170,8 +178,8 @@ def save_config(cfg: Any, path: Path) -> None:
     tmp.replace(path)
 
 
-def load_config(path: Path, expected: type[C] | None = None) -> C:
-    """Read a ``config.json``; every problem becomes one clear :class:`UserError`."""
+def load_config(path: Path, expected: type[C] | None, registry: Registry) -> C:
+    """Read a ``config.json`` whose classes are in ``registry``; every problem becomes one clear :class:`UserError`."""
     path = Path(path)
     if path.is_dir():
         path = path / "config.json"
@@ -193,17 +201,10 @@ def load_config(path: Path, expected: type[C] | None = None) -> C:
             f"{__version__}, which reads format {CONFIG_FORMAT}",
             "install the fourierf version that wrote it, or retrain with this version",
         )
-    _import_plugins()
     try:
-        return from_dict(payload["config"], expected)
+        return from_dict(payload["config"], expected, registry)
     except (ValueError, TypeError, KeyError) as err:
         fail(
             f"{path} does not match this fourierf version's config: {err}",
             "retrain, or use the fourierf version that wrote it",
         )
-
-
-def _import_plugins() -> None:
-    """Importing the registries makes every built-in config class known to the JSON loader."""
-    import fourierf_plugin.data.parsers
-    import fourierf_plugin.method_configs  # noqa: F401

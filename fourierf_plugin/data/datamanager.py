@@ -12,8 +12,9 @@ from torch import Tensor
 from fourierf_plugin.cameras.cameras import Cameras
 from fourierf_plugin.cameras.ndc import ndc_rays
 from fourierf_plugin.configs.base import InstantiateConfig
-from fourierf_plugin.data.dataparser_base import DataparserOutputs, RaySpace, Split
+from fourierf_plugin.data.dataparser_base import DataparserOutputs, Split
 from fourierf_plugin.data.parsers import DataParserUnion, default_dataparser
+from fourierf_plugin.data.scene_effects import RaySpace
 from fourierf_plugin.utils.errors import fail
 
 
@@ -57,13 +58,18 @@ class DataManager:
     config: DataManagerConfig
 
     def __init__(
-        self, config: DataManagerConfig, device: torch.device, generator: torch.Generator, load_train: bool = True
+        self,
+        config: DataManagerConfig,
+        device: torch.device,
+        generator: torch.Generator,
+        ray_space: RaySpace,
+        load_train: bool = True,
     ):
         self.config = config
         self.device = device
         self.generator = generator
         self.parser = config.dataparser.setup()
-        self.ray_space: RaySpace = self.parser.declaration().ray_space
+        self.ray_space = ray_space
         self.train_outputs: DataparserOutputs | None = None
         self._train_rays: RayBatch | None = None
         self.active = torch.zeros(0, dtype=torch.long)
@@ -74,12 +80,6 @@ class DataManager:
             self.train_outputs = self.parser.get_outputs("train")
             self.active = torch.arange(self.train_outputs.images[..., 0].numel())
 
-    def set_ray_space(self, ray_space: RaySpace) -> None:
-        """Rays are made lazily, so the pipeline can apply an override of the scene's declared ray space first."""
-        if ray_space != self.ray_space:
-            self.ray_space = ray_space
-            self._train_rays = None
-
     @property
     def train_rays(self) -> RayBatch | None:
         if self._train_rays is None and self.load_train:
@@ -88,7 +88,7 @@ class DataManager:
 
     @property
     def reference_outputs(self) -> DataparserOutputs:
-        """The split that defines the scene (box, near/far, declaration) for the model."""
+        """The split that defines the scene (box, near/far) for the model."""
         if self.train_outputs is None:
             self.train_outputs = self.parser.get_outputs("train")
         return self.train_outputs

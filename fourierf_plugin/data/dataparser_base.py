@@ -1,4 +1,4 @@
-"""The narrow waist between dataset formats and the model: images, cameras, a box, and what the scene needs."""
+"""The narrow waist between dataset formats and the model: images, cameras, a box; and what the scene declares."""
 
 from __future__ import annotations
 
@@ -10,36 +10,9 @@ from torch import Tensor
 
 from fourierf_plugin.cameras.cameras import Cameras
 from fourierf_plugin.configs.base import InstantiateConfig
+from fourierf_plugin.data.scene_effects import SceneDeclaration
 
 Split = Literal["train", "val", "test"]
-# "none": photos with no background; every ray must be absorbed (trained on black or white at random, shown on black).
-Background = Literal["white", "black", "random", "none"]
-RaySpace = Literal["euclidean", "ndc"]
-
-
-@dataclass(frozen=True)
-class SceneDeclaration:
-    """What a scene calls for; the model builds only these pieces.
-
-    A parser declares them from what it knows about the data (RGBA synthetic renders want a white background,
-    forward-facing photos want NDC rays and occlusion regularisation); the model config can override each one.
-    """
-
-    background: Background = "white"
-    ray_space: RaySpace = "euclidean"
-    bounded: bool = True
-    view_dependent: bool = False
-    occlusion_regularization: bool = False
-
-    def describe(self) -> str:
-        def yes(flag: bool) -> str:
-            return "yes" if flag else "no"
-
-        extent = "bounded" if self.bounded else "forward-facing"
-        return (
-            f"background={self.background}, rays={self.ray_space}, {extent}, "
-            f"view-dependent={yes(self.view_dependent)}, occlusion-regularisation={yes(self.occlusion_regularization)}"
-        )
 
 
 @dataclass
@@ -57,7 +30,6 @@ class DataparserOutputs:
     scene_box: Tensor  # [2, 3] axis-aligned bounding box (min, max)
     near: float
     far: float
-    declaration: SceneDeclaration
     scene_name: str
     source_files: list[Path] = field(default_factory=list)
     depth_bounds: tuple[float, float] | None = None  # metric (near, far) of the content, e.g. for spiral paths in NDC
@@ -82,5 +54,6 @@ class DataParser:
         raise NotImplementedError
 
     def declaration(self) -> SceneDeclaration:
-        """What the scene needs, known without loading images (so presets can be chosen before set-up)."""
+        """What the scene calls for, known without loading images (effects and presets are resolved from it before
+        anything is built)."""
         return SceneDeclaration()

@@ -7,9 +7,10 @@ from pathlib import Path
 
 import torch
 
-from fourierf_plugin.configs.base import load_config
+from fourierf_plugin.configs.base import Registry, load_config
 from fourierf_plugin.engine.checkpoint import load_checkpoint, load_latest_checkpoint
-from fourierf_plugin.engine.trainer import TrainerConfig, pick_device, seed_everything
+from fourierf_plugin.engine.machine import pick_device, seed_everything
+from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.pipelines.base import Pipeline
 
 
@@ -30,15 +31,17 @@ def run_dir_of(config_path: Path) -> Path:
 
 def load_run(
     config_path: Path,
+    registry: Registry,
     checkpoint: Path | None = None,
     device: str = "auto",
     data: Path | None = None,
 ) -> LoadedRun:
     """Config, pipeline with the checkpoint's weights (grid shapes restored), and the step it was taken at.
 
-    ``data`` overrides the scene folder recorded in the config (a run made on another machine).
+    ``registry`` names the config classes the run may use (``method_configs.config_registry()``); ``data``
+    overrides the scene folder recorded in the config (a run made on another machine).
     """
-    config = load_config(config_path, TrainerConfig)
+    config = load_config(config_path, TrainerConfig, registry)
     run_dir = run_dir_of(config_path)
     if data is not None:
         config.pipeline.datamanager.dataparser.data = data

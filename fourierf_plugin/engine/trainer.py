@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import random
 import signal
 import time
 from collections import Counter
@@ -13,38 +12,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar, Literal
 
-import numpy as np
 import torch
 from rich.markup import escape
 
 from fourierf_plugin import __version__
-from fourierf_plugin.configs.base import InstantiateConfig, load_config, save_config
-from fourierf_plugin.configs.option_checks import check_training_options
+from fourierf_plugin.configs.base import InstantiateConfig, save_config
 from fourierf_plugin.engine.checkpoint import load_latest_checkpoint, save_checkpoint
+from fourierf_plugin.engine.machine import pick_device, seed_everything
 from fourierf_plugin.engine.optimizers import OptimizerConfig, build_optimizer, set_learning_rates
+from fourierf_plugin.engine.option_checks import check_training_options
 from fourierf_plugin.engine.run_dir import make_run_dir
-from fourierf_plugin.engine.scene_presets import apply_real_scene_preset
+from fourierf_plugin.exporter.marching_cubes import describe, export_field_mesh
 from fourierf_plugin.pipelines.base import Pipeline, PipelineConfig
-from fourierf_plugin.utils.console import TrainingProgress, append_jsonl, format_duration, get_console, warn
+from fourierf_plugin.utils.console import TaskProgress, append_jsonl, format_duration, get_console, warn
 from fourierf_plugin.utils.errors import UserError, fail
 from fourierf_plugin.utils.phases import PhaseTimer, phase
-
-
-def pick_device(choice: str) -> torch.device:
-    """CUDA when available (or asked for), else CPU."""
-    if choice == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    if choice == "cuda" and not torch.cuda.is_available():
-        fail("--device cuda was asked for but no CUDA device is available", "use --device auto or --device cpu")
-    return torch.device(choice)
-
-
-def seed_everything(seed: int) -> torch.Generator:
-    """Seed python, numpy and torch; return the generator that drives every random draw of a run."""
-    random.seed(seed)
-    np.random.seed(seed % 2**32)
-    torch.manual_seed(seed)
-    return torch.Generator().manual_seed(seed)
 
 
 def drop_records_after(path: Path, step: int) -> None:
@@ -97,9 +79,12 @@ class Trainer:
         self.start_step = 0
         self.resume_state: dict | None = None
         check_training_options(config)  # the Python API gets the same option checks as the CLI
+        if not config.pipeline.effects.is_resolved:
+            raise ValueError(
+                "the trainer takes a finished config: pass it through fourierf_plugin.method_configs.finalize "
+                "(fourierf-train does), which resolves the scene's effects and preset"
+            )
         c = config
-        if c.max_num_iterations < 1:
-            fail(f"--max-num-iterations must be at least 1, got {c.max_num_iterations}", "pass a positive number")
         outside = [s for s in c.export_mesh_at if not 1 <= s <= c.max_num_iterations]
         if outside:
             fail(
@@ -107,10 +92,8 @@ class Trainer:
                 "pass iteration numbers within the run",
             )
         if c.load_dir is not None:
-            self._prepare_resume(c.load_dir)
-            c = self.config
-        else:
-            self._choose_scene_preset()
+            _, self.resume_state = load_latest_checkpoint(Path(c.load_dir) / "checkpoints")
+            self.start_step = int(self.resume_state["step"])
         if c.threads is not None:
             torch.set_num_threads(c.threads)
         self.device = pick_device(c.device)
@@ -131,37 +114,6 @@ class Trainer:
         self._announce()
 
     # -- set-up ---------------------------------------------------------------------------------------------------
-    def _choose_scene_preset(self) -> None:
-        """Synthetic or real-scene settings, from what the scene declares (forward-facing → real), unless forced."""
-        c = self.config
-        declared = c.pipeline.datamanager.dataparser.setup().declaration()
-        preset = c.scene_preset
-        if preset == "auto":
-            preset = "synthetic" if declared.bounded else "real"
-        c.scene_preset = preset
-        if preset != "real":
-            return
-        from fourierf_plugin.method_configs import all_methods
-
-        applied, kept = apply_real_scene_preset(c, all_methods.get(c.method_name))
-        reason = "the scene is forward-facing" if declared.bounded is False else "--scene-preset real"
-        self.console.print(f"real-scene preset ({reason}): {', '.join(applied)}")
-        if kept:
-            self.console.print(f"  kept your settings for: {', '.join(kept)}")
-
-    def _prepare_resume(self, load_dir: Path) -> None:
-        saved = load_config(load_dir, TrainerConfig)
-        if saved.method_name != self.config.method_name:
-            fail(
-                f"{load_dir} holds a '{saved.method_name}' run, but '{self.config.method_name}' was asked to resume it",
-                f"run: fourierf-train {saved.method_name} --load-dir {load_dir}",
-            )
-        _, state = load_latest_checkpoint(Path(load_dir) / "checkpoints")
-        saved.load_dir = Path(load_dir)
-        self.config = saved
-        self.resume_state = state
-        self.start_step = int(state["step"])
-
     def _write_views(self) -> None:
         scene = self.pipeline.datamanager.reference_outputs
         record = {"scene": scene.scene_name, "train_view_ids": scene.view_ids, "train_image_names": scene.image_names}
@@ -170,13 +122,12 @@ class Trainer:
     def _announce(self) -> None:
         scene = self.pipeline.datamanager.reference_outputs
         model = self.pipeline.model
-        d = scene.declaration
         self.console.print(
             f"[bold]{escape(self.config.method_name)}[/bold] on {escape(scene.scene_name)}: "
             f"run directory {escape(str(self.run_dir))}"
         )
         self.console.print(f"training views ({len(scene.view_ids)}): {escape(', '.join(scene.image_names))}")
-        self.console.print(f"scene effects: {model.effects.describe()} (declared: {d.describe()})")
+        self.console.print(f"scene effects: {model.effects.describe()}; {self.config.scene_preset} preset")
         self.console.print(
             f"device {self.device}, grid {model.field.resolution}, {self.config.max_num_iterations} iterations, "
             f"occupancy updates after {model.occupancy_steps}, upsamples after {model.upsample_steps}"
@@ -208,8 +159,6 @@ class Trainer:
 
     def _export_mesh(self, step: int) -> None:
         """The coarse-to-fine trajectory as meshes; a mesh that cannot be made is a warning, never a lost run."""
-        from fourierf_plugin.exporter.marching_cubes import describe, export_field_mesh
-
         path = self.run_dir / "meshes" / f"step-{step:06d}.ply"
         try:
             report = export_field_mesh(self.pipeline.model, step, path, resolution=self.config.export_mesh_resolution)
@@ -235,7 +184,7 @@ class Trainer:
         # With --profile-phases the loop body is timed phase by phase (logging and saving excluded).
         timer = PhaseTimer() if c.profile_phases else None
         phase_totals: Counter[str] = Counter()  # update() adds the seconds of each log interval
-        with _DeferredInterrupt() as interrupt, TrainingProgress(c.max_num_iterations, self.start_step) as progress:
+        with _DeferredInterrupt() as interrupt, TaskProgress(c.max_num_iterations, self.start_step) as progress:
             for step in range(self.start_step, c.max_num_iterations):
                 with timer or contextlib.nullcontext(), phase("other"):
                     lr_scale = set_learning_rates(optimizer, c.optimizer, step, reset_steps, c.max_num_iterations)

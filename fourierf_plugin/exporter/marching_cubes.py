@@ -22,8 +22,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -317,32 +316,8 @@ def write_mesh(mesh: trimesh.Trimesh, path: Path) -> None:
 
 
 # ---------------------------------------------------------------------------------------------------- trained model
-@contextmanager
-def _filtered_at(model: Any, step: int, frequency_cap: float | None) -> Iterator[None]:
-    """Filter the grids at the step's cutoffs (or the cap) for the export, then put back the caller's filtering.
-
-    Why restore: the trainer exports between iterations, and its cached (autograd) filtering must not silently turn
-    into the capped one. The field keeps that cache in ``_filtered``; there is no public getter for it.
-    """
-    field = model.field
-    previous = getattr(field, "_filtered", None)
-    try:
-        with torch.no_grad():
-            if frequency_cap is None:
-                model.prepare(step)
-            else:
-                fc = model.config.fourier
-                field.prepare(frequency_cap, frequency_cap, fc.plane_leakage, fc.app_planes_follow_density)
-        yield
-    finally:
-        if previous is None:
-            field.invalidate()
-        else:
-            field._filtered = previous
-
-
 def model_space(model: Any) -> Literal["world", "ndc"]:
-    return "ndc" if getattr(model, "ray_space", "euclidean") == "ndc" else "world"
+    return "ndc" if model.effects.ray_space == "ndc" else "world"
 
 
 def export_field_mesh(
@@ -361,9 +336,9 @@ def export_field_mesh(
 ) -> MeshReport:
     """Marching cubes of a FourieRF/TensoRF model's density, written to ``output_path`` (None: not written).
 
-    ``step`` picks the Fourier cutoffs (``model.prepare(step)``); ``frequency_cap`` f instead filters both density
+    ``step`` picks the Fourier cutoffs (``model.cutoffs(step)``); ``frequency_cap`` f instead filters both density
     and colour grids at f, i.e. the coarse geometry the field holds below that share of the spectrum. ``bbox``
-    defaults to the model's current AABB. The model is left as it was (its filtering cache is restored).
+    defaults to the model's current AABB. The model is left as it was (``field.filtered_at`` restores its filtering).
     """
     started = time.perf_counter()
     if output_path is not None:
@@ -380,7 +355,8 @@ def export_field_mesh(
     device = model.aabb.device
     step_size, distance_scale = float(model.step_size), float(model.config.distance_scale)
 
-    with _filtered_at(model, step, cap):
+    cutoffs = model.cutoffs(step) if cap is None else (cap, cap)
+    with model.field.filtered_at(*cutoffs):
 
         def field_values(xyz: Tensor) -> Tensor:
             sigma = model.field.density(xyz)
@@ -395,7 +371,7 @@ def export_field_mesh(
         mesh, components, removed = remove_small_components(mesh, min_component_faces, keep_largest)
         if colors:
             mesh.visual.vertex_colors = vertex_colors(
-                model.field.rgb, mesh.vertices, mesh.vertex_normals, model.view_dependent, chunk, device
+                model.field.rgb, mesh.vertices, mesh.vertex_normals, model.effects.view_dependent, chunk, device
             )
     if output_path is not None:
         write_mesh(mesh, output_path)

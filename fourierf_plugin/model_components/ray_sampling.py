@@ -1,6 +1,10 @@
-"""Ray–box intersection and fixed-step sampling (TensoRF's marcher), as pure functions."""
+"""Ray–box intersection and the two samplers (fixed steps through the box, even steps along NDC rays), as pure
+functions."""
 
 from __future__ import annotations
+
+import math
+from dataclasses import dataclass
 
 import torch
 from torch import Tensor
@@ -38,3 +42,67 @@ def step_samples(start: Tensor, step: float, num_samples: int, jitter: Tensor | 
 def sample_deltas(t: Tensor) -> Tensor:
     """Interval lengths [R, N]: differences of consecutive samples, the last one 0 (TensoRF convention)."""
     return torch.cat([t[:, 1:] - t[:, :-1], torch.zeros_like(t[:, :1])], dim=-1)
+
+
+@dataclass
+class RaySamples:
+    """Samples along a batch of R rays, N per ray: parameters, interval lengths, points and which lie in the box."""
+
+    t: Tensor  # [R, N] ray parameters
+    deltas: Tensor  # [R, N] interval lengths (the last 0)
+    points: Tensor  # [R, N, 3]
+    inside: Tensor  # [R, N] bool: the sample lies inside the box
+    view_directions: Tensor  # [R, 3] unit directions, for view-dependent colour
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.t.shape[0], self.t.shape[1]
+
+
+def _points(origins: Tensor, directions: Tensor, t: Tensor) -> Tensor:
+    return torch.addcmul(origins.unsqueeze(1), directions.unsqueeze(1), t.unsqueeze(-1))
+
+
+def box_samples(
+    origins: Tensor,
+    directions: Tensor,
+    aabb: Tensor,
+    near: float,
+    far: float,
+    step: float,
+    max_samples: int,
+    generator: torch.Generator | None = None,
+) -> RaySamples:
+    """TensoRF's marcher: fixed steps from where each (unit-direction) ray enters the box, as many as the longest
+    ray needs (at most ``max_samples``); with a ``generator`` each ray is shifted by its own random fraction of a
+    step (training), without one the samples sit on the step grid (renders)."""
+    num_rays = origins.shape[0]
+    start, t_exit = ray_box_span(origins, directions, aabb, near, far)
+    span = ((t_exit - start) / step).clamp(min=0)
+    needed = math.ceil(float(span.max())) + 1 if num_rays else 0
+    num_samples = max(1, min(max_samples, needed))
+    jitter = torch.rand(num_rays, generator=generator).to(origins.device) if generator is not None else None
+    t = step_samples(start, step, num_samples, jitter)
+    return RaySamples(t, sample_deltas(t), _points(origins, directions, t), t < t_exit.unsqueeze(-1), directions)
+
+
+def ndc_samples(
+    origins: Tensor,
+    directions: Tensor,
+    aabb: Tensor,
+    near: float,
+    far: float,
+    num_samples: int,
+    generator: torch.Generator | None = None,
+) -> RaySamples:
+    """NDC rays: t evenly spaced in [near, far] (= [0, 1]), each sample jittered within its interval when a
+    ``generator`` is given; δ is scaled by |d| (NDC directions are not unit)."""
+    num_rays, device = origins.shape[0], origins.device
+    t = torch.linspace(near, far, num_samples, device=device).expand(num_rays, num_samples)
+    if generator is not None:
+        jitter = torch.rand(num_rays, num_samples, generator=generator).to(device)
+        t = t + jitter * ((far - near) / num_samples)
+    points = _points(origins, directions, t)
+    inside = ((points >= aabb[0]) & (points <= aabb[1])).all(dim=-1)
+    deltas = sample_deltas(t) * directions.norm(dim=-1, keepdim=True)
+    return RaySamples(t, deltas, points, inside, directions / directions.norm(dim=-1, keepdim=True))

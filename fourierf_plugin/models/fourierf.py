@@ -1,4 +1,4 @@
-"""FourieRF model: fixed-step sampler over the occupancy grid, the Fourier-filtered field, compositing, losses.
+"""FourieRF model: sample rays → march the occupancy grid → the Fourier-filtered field → composite; and its losses.
 
 All schedules (cutoffs, L1 weight, upsample and occupancy-update steps) are functions of the step and the run
 length; the model changes its own structure in ``after_step`` and tells the caller when parameters were replaced
@@ -8,20 +8,20 @@ so the optimiser can be rebuilt. It never reaches into the trainer.
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
-from typing import ClassVar, Literal
+from typing import ClassVar
 
 import torch
 from torch import Tensor, nn
-from torch.utils.checkpoint import checkpoint
 
+from fourierf_plugin.accel import AccelConfig, build_ops
 from fourierf_plugin.configs.base import InstantiateConfig
-from fourierf_plugin.data.dataparser_base import Background, SceneDeclaration
+from fourierf_plugin.data.scene_effects import SceneEffects
 from fourierf_plugin.field_components import schedules
 from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig, FourierTensoRFField
 from fourierf_plugin.model_components import losses
 from fourierf_plugin.model_components.gradient_scaling import floaters_scale, scale_gradient
+from fourierf_plugin.model_components.marching import densities, densities_until_opaque, shade
 from fourierf_plugin.model_components.occupancy import (
     OccupancyGrid,
     occupancy_from_alpha,
@@ -29,9 +29,8 @@ from fourierf_plugin.model_components.occupancy import (
     shrink_bounds,
     vertex_grid,
 )
-from fourierf_plugin.model_components.ray_sampling import ray_box_span, sample_deltas, step_samples
+from fourierf_plugin.model_components.ray_sampling import RaySamples, box_samples, ndc_samples, ray_box_span
 from fourierf_plugin.model_components.rendering import (
-    accumulate,
     background_color,
     blend_background,
     composite_target,
@@ -39,7 +38,6 @@ from fourierf_plugin.model_components.rendering import (
     expected_depth,
 )
 from fourierf_plugin.utils.console import get_console
-from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.utils.phases import phase
 
 
@@ -61,17 +59,6 @@ class FourierConfig:
     """Official-code behaviour: appearance planes use the density cutoff instead of the colour cutoff."""
 
 
-def resolve_effects(declared: SceneDeclaration, config: FourieRFModelConfig) -> SceneDeclaration:
-    """The scene's declaration with the model config's explicit overrides (None = as declared) applied."""
-    overrides = {
-        "background": config.background,
-        "ray_space": config.ray_space,
-        "view_dependent": config.view_dependent,
-        "occlusion_regularization": config.occlusion_regularization,
-    }
-    return dataclasses.replace(declared, **{k: v for k, v in overrides.items() if v is not None})
-
-
 def occlusion_penalty(sigma: Tensor, fraction: float) -> Tensor:
     """FreeNeRF's occlusion term: mean over rays and all K samples of σ_k · 1[k < M], M = round(fraction · K).
 
@@ -82,20 +69,6 @@ def occlusion_penalty(sigma: Tensor, fraction: float) -> Tensor:
         return sigma.sum()  # no rays: 0 with a graph, not the NaN of an empty mean
     m = max(1, round(fraction * k))
     return sigma[:, :m].sum(dim=-1).mean() / k
-
-
-def _event_steps(fractions: tuple[float, ...], max_iters: int, flag: str) -> list[int]:
-    """Steps of scheduled events; a schedule that does not fit the run is the user's to fix."""
-    if not fractions:
-        return []
-    try:
-        return schedules.steps_from_fractions(fractions, max_iters)
-    except ValueError as err:
-        fail(
-            f"{flag} {' '.join(map(str, fractions))} does not fit a run of {max_iters} iterations ({err})",
-            f"use fractions strictly between 0 and 1 and a --max-num-iterations long enough to place them "
-            f"(at least {max(2, math.ceil(1 / min(fractions)))} here), or pass {flag} with no value to disable them",
-        )
 
 
 @dataclass
@@ -115,28 +88,32 @@ class FourieRFModel(nn.Module):
         scene_box: Tensor,
         near: float,
         far: float,
-        declaration: SceneDeclaration,
+        effects: SceneEffects,
         max_iters: int,
         generator: torch.Generator,
+        device: torch.device | str = "cpu",
     ) -> None:
         super().__init__()
         self.config = config
         self.near, self.far = float(near), float(far)
         self.max_iters = int(max_iters)
         self.generator = generator
-        self.effects = resolve_effects(declaration, config)
-        self.background: Background = self.effects.background
-        self.view_dependent = self.effects.view_dependent
-        self.ray_space = self.effects.ray_space
+        self.effects = effects
         fc = config.field
-        self.upsample_steps = _event_steps(
-            fc.upsample_fractions, max_iters, "--pipeline.model.field.upsample-fractions"
-        )
+        self.upsample_steps = schedules.steps_from_fractions(fc.upsample_fractions, max_iters)
         self.voxel_targets = schedules.voxel_counts(fc.n_voxels_init, fc.n_voxels_final, len(self.upsample_steps))
-        frac = config.occupancy_update_fractions
-        self.occupancy_steps = _event_steps(frac, max_iters, "--pipeline.model.occupancy-update-fractions")
+        self.occupancy_steps = schedules.steps_from_fractions(config.occupancy_update_fractions, max_iters)
         reso = schedules.n_to_reso(fc.n_voxels_init, (scene_box[1] - scene_box[0]).tolist())
-        self.field = FourierTensoRFField(fc, scene_box, reso, self.view_dependent, generator)
+        self.field = FourierTensoRFField(
+            fc,
+            scene_box,
+            reso,
+            effects.view_dependent,
+            generator,
+            ops=build_ops(config.accel, device),
+            plane_leakage=config.fourier.plane_leakage,
+            app_planes_follow_density=config.fourier.app_planes_follow_density,
+        )
         self.occupancy = OccupancyGrid()
 
     # -- schedules (pure functions of the step) ---------------------------------------------------------------
@@ -175,160 +152,80 @@ class FourieRFModel(nn.Module):
 
     # -- forward ----------------------------------------------------------------------------------------------
     def prepare(self, step: int) -> None:
-        """Filter the grids at this step's cutoffs once; call before ``forward`` (under no_grad for eval)."""
-        f_d, f_c = self.cutoffs(step)
-        fc = self.config.fourier
+        """Filter the grids at this step's cutoffs once; call before ``forward`` (under no_grad for renders)."""
         with phase("fourier_filter"):
-            self.field.prepare(f_d, f_c, fc.plane_leakage, fc.app_planes_follow_density)
+            self.field.prepare(*self.cutoffs(step))
 
-    def forward(self, origins: Tensor, directions: Tensor, training: bool, background: Tensor | None = None) -> dict:
-        """Render rays [R, 3] (unit directions; NDC directions as made). Returns rgb [R, 3], accumulation, depth [R]."""
-        num_rays = origins.shape[0]
-        device = origins.device
+    def forward(self, origins: Tensor, directions: Tensor, background: Tensor | None = None) -> dict:
+        """Render rays [R, 3] (unit directions; NDC directions as made): rgb [R, 3], accumulation and depth [R].
+
+        In training mode samples are jittered and the regularisers' inputs are returned too; in eval mode colours
+        are clamped and, if the accel config says so, rays stop marching once they are opaque.
+        """
         if background is None:
-            background = background_color(
-                self.background if training else self._eval_background(), num_rays, device, self.generator
-            )
+            kind = self.effects.background if self.training else self.effects.eval_background
+            background = background_color(kind, origins.shape[0], origins.device, self.generator)
         with phase("sampling"):
-            if self.ray_space == "ndc":
-                t, deltas = self._ndc_samples(origins, directions, training)
-            else:
-                t, deltas, t_exit = self._box_samples(origins, directions, training)
-            num_samples = t.shape[1]
-            xyz = torch.addcmul(origins.unsqueeze(1), directions.unsqueeze(1), t.unsqueeze(-1))
-            if self.ray_space == "ndc":
-                inside = ((xyz >= self.aabb[0]) & (xyz <= self.aabb[1])).all(dim=-1)
-                directions = directions / directions.norm(dim=-1, keepdim=True)
-            else:
-                inside = t < t_exit.unsqueeze(-1)
-            march_to_opacity = not training and self.config.eval_stop_transmittance > 0
-            # Samples are addressed by flat indices into [R·N] from here on: boolean masks would run a nonzero
-            # pass at every use (indexing, index_put and their backward), ~3x the cost of one index_select each.
-            points = xyz.view(-1, 3)
-            if not march_to_opacity:  # (the early-terminated march checks occupancy itself, for live rays only)
-                valid, valid_points = self._occupied(points, inside.view(-1).nonzero().squeeze(1))
+            samples = self.sample(origins, directions)
         with phase("density"):
-            if march_to_opacity:
-                sigma = self._density_until_opaque(xyz, inside, deltas)
-            else:
-                sigma = points.new_zeros(num_rays * num_samples)
-                if valid.numel():
-                    sigma = sigma.index_put((valid,), self.field.density(valid_points))
-                sigma = sigma.view(num_rays, num_samples)
-        grad_scale = floaters_scale(t) if self.config.floaters_gradient_scaling and training else None
-        if grad_scale is not None:
-            sigma = scale_gradient(sigma, grad_scale)
+            sigma = self.march(samples)
+        scale = floaters_scale(samples.t) if self.training and self.config.floaters_gradient_scaling else None
+        if scale is not None:
+            sigma = scale_gradient(sigma, scale)
         with phase("compositing"):
-            weights = composite_weights(sigma, deltas, self.config.distance_scale)
+            weights = composite_weights(sigma, samples.deltas, self.config.distance_scale)
         with phase("appearance"):
-            shade = (weights.detach().view(-1) > self.config.weight_threshold).nonzero().squeeze(1)
-            rgb = weights.new_zeros(num_rays, 3)
-            if shade.numel():
-                ray_of = shade.div(num_samples, rounding_mode="floor")
-                dirs = directions.index_select(0, ray_of) if self.view_dependent else None
-                colors = self._colors(points.index_select(0, shade), dirs)
-                if grad_scale is not None:
-                    colors = scale_gradient(colors, grad_scale.view(-1, 1).index_select(0, shade))
-                rgb = accumulate(weights.view(-1).index_select(0, shade), colors, ray_of, num_rays)
+            rgb = shade(
+                self.field.rgb, samples, weights, self.config.weight_threshold, self.effects.view_dependent, scale
+            )
         with phase("compositing"):
             acc = weights.sum(dim=-1)
             rgb = blend_background(rgb, acc, background)
-            if not training:
+            if not self.training:
                 rgb = rgb.clamp(0.0, 1.0)
-            depth = expected_depth(weights, t, torch.full_like(acc, self.far))
+            depth = expected_depth(weights, samples.t, torch.full_like(acc, self.far))
         out = {"rgb": rgb, "accumulation": acc, "depth": depth, "background": background}
-        if training and self.effects.occlusion_regularization:
+        if self.training and self.effects.occlusion_regularization:
             out["occlusion"] = occlusion_penalty(sigma, self.config.occlusion_fraction)
         return out
 
-    def _colors(self, xyz: Tensor, directions: Tensor | None) -> Tensor:
-        """The field's colour at [N, 3] points; in training with many points, in checkpointed chunks
-        (``checkpoint_above``)."""
-        above, chunk = self.config.checkpoint_above, self.config.checkpoint_chunk
-        if not torch.is_grad_enabled() or above <= 0 or xyz.shape[0] <= above:
-            return self.field.rgb(xyz, directions)
-        parts = []
-        for i in range(0, xyz.shape[0], chunk):
-            dirs = directions[i : i + chunk] if directions is not None else None
-            part = checkpoint(self.field.rgb, xyz[i : i + chunk], dirs, use_reentrant=False, preserve_rng_state=False)
-            parts.append(part)
-        return torch.cat(parts)
+    def sample(self, origins: Tensor, directions: Tensor) -> RaySamples:
+        """Fixed steps through the box (euclidean rays) or even steps along NDC rays; jittered in training."""
+        generator = self.generator if self.training else None
+        num = self.samples_per_ray(self.training)
+        if self.effects.ray_space == "ndc":
+            return ndc_samples(origins, directions, self.aabb, self.near, self.far, num, generator)
+        return box_samples(origins, directions, self.aabb, self.near, self.far, self.step_size, num, generator)
 
-    def _occupied(self, points: Tensor, index: Tensor) -> tuple[Tensor, Tensor]:
-        """The listed samples (flat ``index`` into ``points``) that lie in occupied cells: their indices and points."""
-        selected = points.index_select(0, index)
-        if not self.occupancy.active or not index.numel():
-            return index, selected
-        with phase("sampling"):
-            keep = self.occupancy.query(selected).nonzero().squeeze(1)
-        return index.index_select(0, keep), selected.index_select(0, keep)
-
-    def _density_until_opaque(self, xyz: Tensor, inside: Tensor, deltas: Tensor) -> Tensor:
-        """σ [R, N] marched in segments; a ray stops being queried once its transmittance falls below
-        ``eval_stop_transmittance`` (early ray termination: what lies behind an opaque surface cannot show). Samples
-        ``inside`` the box are checked against the occupancy grid segment by segment, for live rays only."""
-        num_rays, num_samples = inside.shape
-        sigma = xyz.new_zeros(num_rays, num_samples)
-        points = xyz.view(-1, 3)
-        depth = xyz.new_zeros(num_rays)
-        max_depth = -math.log(self.config.eval_stop_transmittance)
-        segment = self.config.eval_segment_samples
-        for start in range(0, num_samples, segment):
-            cols = slice(start, start + segment)
-            alive = depth < max_depth
-            if not alive.any():
-                break
-            live = (inside[:, cols] & alive.unsqueeze(-1)).view(-1).nonzero().squeeze(1)  # flat in [R, width]
-            width = min(segment, num_samples - start)
-            index = live.div(width, rounding_mode="floor") * num_samples + (live % width + start)  # flat in [R, N]
-            index, selected = self._occupied(points, index)
-            if not index.numel():
-                continue
-            sigma.view(-1).index_put_((index,), self.field.density(selected))
-            depth = depth + (sigma[:, cols] * deltas[:, cols]).sum(dim=-1) * self.config.distance_scale
-        return sigma
-
-    def _box_samples(self, origins: Tensor, directions: Tensor, training: bool) -> tuple[Tensor, Tensor, Tensor]:
-        """Fixed-step marching from the box entry (unit directions, metric t), per-ray jitter in training.
-
-        Returns t and δ [R, N] and where each ray leaves the box [R].
-        """
-        num_rays = origins.shape[0]
-        start, t_exit = ray_box_span(origins, directions, self.aabb, self.near, self.far)
-        step = self.step_size
-        span = ((t_exit - start) / step).clamp(min=0)
-        needed = math.ceil(float(span.max())) + 1 if num_rays else 0
-        num_samples = max(1, min(self.samples_per_ray(training), needed))
-        jitter = torch.rand(num_rays, generator=self.generator).to(origins.device) if training else None
-        t = step_samples(start, step, num_samples, jitter)
-        return t, sample_deltas(t), t_exit
-
-    def _ndc_samples(self, origins: Tensor, directions: Tensor, training: bool) -> tuple[Tensor, Tensor]:
-        """NDC rays: t evenly spaced in [near, far] (= [0, 1]) with per-sample jitter in training; δ scaled by |d|."""
-        num_rays, device = origins.shape[0], origins.device
-        n = self.samples_per_ray(training)
-        t = torch.linspace(self.near, self.far, n, device=device).expand(num_rays, n)
-        if training:
-            t = t + torch.rand(num_rays, n, generator=self.generator).to(device) * ((self.far - self.near) / n)
-        return t, sample_deltas(t) * directions.norm(dim=-1, keepdim=True)
-
-    def _eval_background(self) -> Background:
-        """Renders for evaluation: random → white, none (photos) → black."""
-        return {"random": "white", "none": "black"}.get(self.background, self.background)
+    def march(self, samples: RaySamples) -> Tensor:
+        """σ [R, N] at the samples in occupied cells; renders may stop each ray once it is opaque."""
+        accel = self.config.accel
+        if self.training or accel.early_stop_transmittance <= 0:
+            return densities(self.field.density, samples, self.occupancy)
+        return densities_until_opaque(
+            self.field.density,
+            samples,
+            self.occupancy,
+            self.config.distance_scale,
+            accel.early_stop_transmittance,
+            accel.early_stop_segment,
+        )
 
     def loss_dict(self, outputs: dict, target_rgba: Tensor, step: int) -> dict[str, Tensor]:
         """Photometric MSE plus the regularisers, all on this iteration's filtered grids."""
         target = composite_target(target_rgba, outputs["background"])
         g = self.field.filtered
         c = self.config
+        tv_terms = self.field.ops.squared_differences
         out = {"mse": losses.mse(outputs["rgb"], target)}
         if c.tv_weight_density > 0:
-            out["tv_density"] = c.tv_weight_density * losses.grid_tv(g.density_planes, g.density_lines)
+            out["tv_density"] = c.tv_weight_density * losses.grid_tv(g.density.planes, g.density.lines, sq=tv_terms)
         if c.tv_weight_appearance > 0:
-            out["tv_appearance"] = c.tv_weight_appearance * losses.grid_tv(g.appearance_planes, g.appearance_lines)
+            tv = losses.grid_tv(g.appearance.planes, g.appearance.lines, sq=tv_terms)
+            out["tv_appearance"] = c.tv_weight_appearance * tv
         l1 = self.l1_weight(step)
         if l1 > 0:
-            out["l1_density"] = l1 * losses.density_l1(g.density_planes, g.density_lines)
+            out["l1_density"] = l1 * losses.density_l1(g.density.planes, g.density.lines)
         if "occlusion" in outputs and c.occlusion_weight > 0:
             out["occlusion"] = c.occlusion_weight * outputs["occlusion"]
         return out
@@ -337,13 +234,18 @@ class FourieRFModel(nn.Module):
     def render_rays(
         self, origins: Tensor, directions: Tensor, step: int, chunk: int | None = None
     ) -> dict[str, Tensor]:
-        """Evaluation render in chunks (no jitter, clamped colour) at the cutoffs of ``step``."""
-        self.prepare(step)
-        chunk = chunk or self.config.eval_chunk_rays
-        parts = [
-            self.forward(origins[i : i + chunk], directions[i : i + chunk], training=False)
-            for i in range(0, origins.shape[0], chunk)
-        ]
+        """Render whole images in eval mode, in chunks (no jitter, clamped colour), at the cutoffs of ``step``."""
+        was_training = self.training
+        self.eval()
+        try:
+            self.prepare(step)
+            chunk = chunk or self.config.accel.render_chunk_rays
+            parts = [
+                self.forward(origins[i : i + chunk], directions[i : i + chunk])
+                for i in range(0, max(origins.shape[0], 1), chunk)  # no rays: one empty chunk, empty outputs
+            ]
+        finally:
+            self.train(was_training)
         return {k: torch.cat([p[k] for p in parts]) for k in ("rgb", "accumulation", "depth")}
 
     # -- structure changes --------------------------------------------------------------------------------------
@@ -358,7 +260,7 @@ class FourieRFModel(nn.Module):
             changes.params_replaced = True
             # Ray filtering needs metric rays through a box; NDC rays all cross the frustum (TensoRF skips it too).
             second = len(self.occupancy_steps) > 1 and step == self.occupancy_steps[1]
-            changes.filter_rays = second and self.ray_space == "euclidean"
+            changes.filter_rays = second and self.effects.ray_space == "euclidean"
         if step in self.upsample_steps:
             self.prepare(step + 1)
             target = self.voxel_targets[self.upsample_steps.index(step)]
@@ -401,11 +303,8 @@ class FourieRFModel(nn.Module):
     def _upsample(self, reso: list[int]) -> None:
         """Replace each raw factor by the bilinear upsample of its *filtered* version (out-of-band is dropped)."""
         g = self.field.filtered
-        for grid, planes, lines in (
-            (self.field.density_grid, g.density_planes, g.density_lines),
-            (self.field.appearance_grid, g.appearance_planes, g.appearance_lines),
-        ):
-            grid.replace(*grid.upsampled(planes, lines, reso))
+        for grid, factors in ((self.field.density_grid, g.density), (self.field.appearance_grid, g.appearance)):
+            grid.replace(*grid.upsampled(factors.planes, factors.lines, reso))
 
     @torch.no_grad()
     def rays_hit_occupancy(
@@ -449,6 +348,7 @@ class FourieRFModelConfig(InstantiateConfig):
     _target: ClassVar[type] = FourieRFModel
     field: FieldConfig = dataclasses.field(default_factory=FieldConfig)
     fourier: FourierConfig = dataclasses.field(default_factory=FourierConfig)
+    accel: AccelConfig = dataclasses.field(default_factory=AccelConfig)
     occupancy_update_fractions: tuple[float, ...] = (0.2, 0.4)
     """When to rebuild the occupancy grid (fractions of the run); the first shrinks the box, the second filters rays."""
     occupancy_threshold: float = 1e-4
@@ -467,32 +367,9 @@ class FourieRFModelConfig(InstantiateConfig):
     """Density L1 weight before the first occupancy update."""
     l1_weight_rest: float = 4e-5
     """Density L1 weight from the first occupancy update on."""
-    background: Literal["white", "black", "random", "none"] | None = None
-    """Override the background the scene declares (None: as declared; Blender white, LLFF none = photos)."""
-    view_dependent: bool | None = None
-    """Override whether colour depends on the view direction (None: as declared; off for few-shot scenes)."""
-    ray_space: Literal["euclidean", "ndc"] | None = None
-    """Override the ray space (None: as declared; LLFF scenes declare NDC)."""
-    occlusion_regularization: bool | None = None
-    """Override FreeNeRF's occlusion regulariser (None: as declared; on for forward-facing scenes)."""
     occlusion_weight: float = 0.01
     """Weight of the occlusion regulariser (FreeNeRF: 0.01)."""
     occlusion_fraction: float = 20 / 128
     """Share of each ray, from its start, whose densities the occlusion term penalises (FreeNeRF: 20 of 128)."""
     floaters_gradient_scaling: bool = False
     """'Floaters No More': scale density and colour gradients by clamp(t², 0, 1) (t: the ray parameter)."""
-    checkpoint_above: int = 65536
-    """With more shaded samples than this in a training batch, colour is computed in checkpointed chunks: their
-    activations are recomputed in the backward pass instead of kept. Early in a run nearly every sample is shaded;
-    P-CPU's early peak RSS fell from 1.13 to 0.77 GB at no cost there, while checkpointing the final phase's ~50k
-    samples would cost ~45 ms per iteration, hence the threshold. 0 = never."""
-    checkpoint_chunk: int = 32768
-    """Shaded samples per checkpointed chunk (see ``checkpoint_above``)."""
-    eval_chunk_rays: int = 2048
-    """Rays per chunk when rendering whole images: small enough that the temporaries stay in the recycled heap
-    (under glibc's 32 MB mmap ceiling), large enough to amortise the per-chunk work (P-CPU renders: 512 rays 1.90 s,
-    1024 1.69 s, 2048 1.44 s, 4096 1.76 s for the same 60k rays)."""
-    eval_stop_transmittance: float = 1e-4
-    """Evaluation renders stop querying a ray once its transmittance is below this (0 = march every sample)."""
-    eval_segment_samples: int = 128
-    """Samples per ray marched between early-termination checks at evaluation."""

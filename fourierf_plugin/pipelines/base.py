@@ -13,7 +13,8 @@ from torch import Tensor
 from fourierf_plugin.configs.base import InstantiateConfig
 from fourierf_plugin.data.datamanager import DataManager, DataManagerConfig, EvalView
 from fourierf_plugin.data.dataparser_base import Split
-from fourierf_plugin.model_components.rendering import background_color
+from fourierf_plugin.data.scene_effects import EffectsConfig
+from fourierf_plugin.model_components.rendering import background_color, composite_target
 from fourierf_plugin.models.fourierf import Changes, FourieRFModel, FourieRFModelConfig
 from fourierf_plugin.utils.console import get_console
 from fourierf_plugin.utils.phases import phase
@@ -42,32 +43,27 @@ class Pipeline:
     ) -> None:
         self.config = config
         self.device = device
+        self.effects = config.effects.effects()
         self.datamanager: DataManager = config.datamanager.setup(
-            device=device, generator=generator, load_train=load_train
+            device=device, generator=generator, ray_space=self.effects.ray_space, load_train=load_train
         )
         scene = self.datamanager.reference_outputs
         self.model: FourieRFModel = config.model.setup(
             scene_box=scene.scene_box.to(device),
             near=scene.near,
             far=scene.far,
-            declaration=scene.declaration,
+            effects=self.effects,
             max_iters=max_iters,
             generator=generator,
+            device=device,
         ).to(device)
-        self.datamanager.set_ray_space(self.model.ray_space)
-        # Record the effective scene effects in the config, so config.json says what actually ran.
-        effects = self.model.effects
-        config.model.background = effects.background
-        config.model.view_dependent = effects.view_dependent
-        config.model.ray_space = effects.ray_space
-        config.model.occlusion_regularization = effects.occlusion_regularization
 
     def train_step(self, step: int) -> tuple[Tensor, dict[str, float]]:
         """Loss for one batch at ``step``; the grids are filtered once here and reused by every term."""
         with phase("data"):
             batch = self.datamanager.next_batch()
         self.model.prepare(step)
-        outputs = self.model(batch.origins, batch.directions, training=True)
+        outputs = self.model(batch.origins, batch.directions)
         with phase("losses"):
             loss_terms = self.model.loss_dict(outputs, batch.rgba, step)
             loss = torch.stack(list(loss_terms.values())).sum()
@@ -86,14 +82,14 @@ class Pipeline:
         return changes
 
     def render_views(self, split: Split, step: int) -> Iterator[RenderedView]:
-        self.model.eval()
-        background = background_color(self.model._eval_background(), 1, self.device, None)
+        """Every view of a split rendered at the cutoffs of ``step``, beside its target on the same background."""
+        background = background_color(self.effects.eval_background, 1, self.device, None)
         for view in self.datamanager.eval_views(split):
             start = time.perf_counter()
             out = self.model.render_rays(view.rays.origins, view.rays.directions, step)
             seconds = time.perf_counter() - start
             shape = (view.height, view.width)
-            target = view.rays.rgba[:, :3] + (1.0 - view.rays.rgba[:, 3:]) * background
+            target = composite_target(view.rays.rgba, background)
             yield RenderedView(
                 view,
                 out["rgb"].view(*shape, 3).cpu(),
@@ -102,7 +98,6 @@ class Pipeline:
                 out["accumulation"].view(shape).cpu(),
                 seconds,
             )
-        self.model.train()
 
     def state_dict(self) -> dict:
         return {"model": self.model.state_dict(), "datamanager": self.datamanager.state_dict()}
@@ -117,4 +112,6 @@ class Pipeline:
 class PipelineConfig(InstantiateConfig):
     _target: ClassVar[type] = Pipeline
     datamanager: DataManagerConfig = field(default_factory=DataManagerConfig)
+    effects: EffectsConfig = field(default_factory=EffectsConfig)
+    """The scene's effects: None = as the scene declares (resolved once, before anything is built)."""
     model: FourieRFModelConfig = field(default_factory=FourieRFModelConfig)

@@ -16,7 +16,7 @@ import tyro
 
 from fourierf_plugin.bench import coordinator
 from fourierf_plugin.bench.executors import LocalExecutor, RayExecutor, threads_per_worker
-from fourierf_plugin.bench.runner import RunResult, RunTask, Scene, SceneKind, profile_phases_supported
+from fourierf_plugin.bench.runner import RunResult, RunTask, Scene, SceneKind
 from fourierf_plugin.bench.sweep import (
     ProfileMode,
     RunSpec,
@@ -27,8 +27,9 @@ from fourierf_plugin.bench.sweep import (
     known_methods,
 )
 from fourierf_plugin.bench.sweep import merge as merge_runs
+from fourierf_plugin.scripts.cli import run_cli, strip_verbose
 from fourierf_plugin.utils.console import format_duration, get_console, warn
-from fourierf_plugin.utils.errors import fail, run_cli, strip_verbose
+from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.utils.lpips import default_lpips_weights
 
 
@@ -214,14 +215,11 @@ def run_bench(cfg: BenchConfig, command: str, preamble: list[str] | None = None)
         fail(f"--lpips-weights {cfg.lpips_weights} does not exist", "pass the LPIPS-alex v0.1 .pth file")
     if lpips is None:
         warn("LPIPS weights not found; LPIPS is left out of the report (pass --lpips-weights PATH)")
-    profile = profile_phases_supported()
-    if not profile and any(r.profile_phases for r in runs):
-        warn("this trainer has no --profile-phases: the report will have no per-phase breakdown")
     executor, threads = make_executor(cfg)
     out_dir = coordinator.resume_dir(cfg.resume) if cfg.resume else coordinator.claim_output_dir(cfg.output_dir)
     out_dir = out_dir.resolve()
     tasks = [
-        RunTask(r, scene, out_dir, threads, cfg.device, lpips, cfg.keep_checkpoints, profile)
+        RunTask(r, scene, out_dir, threads, cfg.device, lpips, cfg.keep_checkpoints)
         for r in runs
     ]  # fmt: skip
     settings = asdict(cfg) | {"command": command, "threads_per_run": threads}

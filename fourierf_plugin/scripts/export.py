@@ -14,7 +14,6 @@ from typing import Literal
 import tyro
 from rich.markup import escape
 
-from fourierf_plugin.engine.loading import load_run
 from fourierf_plugin.exporter.marching_cubes import (
     DEFAULT_CHUNK,
     MeshReport,
@@ -26,16 +25,16 @@ from fourierf_plugin.exporter.marching_cubes import (
     describe,
     export_field_mesh,
 )
+from fourierf_plugin.scripts.cli import run_cli, strip_verbose
+from fourierf_plugin.scripts.run_options import RunOptions
 from fourierf_plugin.utils.console import get_console
-from fourierf_plugin.utils.errors import fail, run_cli, strip_verbose
+from fourierf_plugin.utils.errors import fail
 
 
 @dataclass
-class MarchingCubesConfig:
+class MarchingCubesConfig(RunOptions):
     """Iso-surface of the density field on a regular grid (scikit-image marching cubes)."""
 
-    load_config: Path = tyro.MISSING
-    """config.json of a training run."""
     output_path: Path = Path("mesh.ply")
     """Mesh file; the format follows the suffix: .ply, .obj or .glb."""
     resolution: int = 256
@@ -56,16 +55,11 @@ class MarchingCubesConfig:
     """Keep only the k largest pieces."""
     frequency_cap: float | None = None
     """Export the field low-passed at this cutoff in [0, 1] (the coarse geometry); default: the run's own cutoff."""
-    checkpoint: Path | None = None
-    """A specific checkpoint (default: the run's latest)."""
-    device: Literal["auto", "cpu", "cuda"] = "auto"
-    data: Path | None = None
-    """Override the scene folder recorded in the config (e.g. the run was made on another machine)."""
     chunk: int = DEFAULT_CHUNK
     """Grid points evaluated at once (lower it if the device runs out of memory)."""
 
 
-Commands = tyro.extras.subcommand_type_from_defaults({"marching-cubes": MarchingCubesConfig()})
+Commands = tyro.extras.subcommand_type_from_defaults({"marching-cubes": MarchingCubesConfig(load_config=tyro.MISSING)})
 
 
 def check_options(cfg: MarchingCubesConfig) -> None:
@@ -83,7 +77,7 @@ def check_options(cfg: MarchingCubesConfig) -> None:
 def run_marching_cubes(cfg: MarchingCubesConfig) -> MeshReport:
     console = get_console()
     check_options(cfg)
-    run = load_run(cfg.load_config, cfg.checkpoint, cfg.device, cfg.data)
+    run = cfg.load_run()
     model = run.pipeline.model
     bbox = None
     if cfg.bbox_min is not None or cfg.bbox_max is not None:

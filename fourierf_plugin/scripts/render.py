@@ -13,33 +13,31 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import TracebackType
 from typing import TYPE_CHECKING, Literal
 
 import imageio.v3 as iio
 import numpy as np
 import tyro
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from fourierf_plugin.cameras.camera_paths import orbit_from_cameras, scale_cameras, spiral_path
 from fourierf_plugin.cameras.cameras import Cameras
 from fourierf_plugin.data.datamanager import camera_rays
-from fourierf_plugin.engine.loading import LoadedRun, load_run
+from fourierf_plugin.engine.loading import LoadedRun
 from fourierf_plugin.engine.run_dir import unique_safe_name
+from fourierf_plugin.scripts.cli import run_cli, strip_verbose
+from fourierf_plugin.scripts.run_options import RunOptions
 from fourierf_plugin.utils.colormaps import Colormap, colorize_accumulation, colorize_depth, depth_range, to_uint8
-from fourierf_plugin.utils.console import format_duration, get_console, warn
-from fourierf_plugin.utils.errors import UserError, fail, run_cli, strip_verbose
+from fourierf_plugin.utils.console import TaskProgress, format_duration, get_console, warn
+from fourierf_plugin.utils.errors import UserError, fail
 
 OUTPUT_NAMES = ("rgb", "depth", "accumulation")
 
 
 @dataclass
-class RenderConfig:
+class RenderConfig(RunOptions):
     """Options shared by every render mode."""
 
-    load_config: Path
-    """config.json of a training run."""
     output_dir: Path | None = None
     """Where to write frames and animations (default: RUN/renders/<mode>-step<N>/)."""
     outputs: tuple[str, ...] = OUTPUT_NAMES
@@ -48,12 +46,6 @@ class RenderConfig:
     """Image size relative to the dataset's cameras (0.5 renders at half width and height, 4x faster)."""
     fps: float = 24.0
     """Frame rate of the animations."""
-    checkpoint: Path | None = None
-    """A specific checkpoint (default: the run's latest)."""
-    device: Literal["auto", "cpu", "cuda"] = "auto"
-    """Where to render (auto: CUDA when available)."""
-    data: Path | None = None
-    """Override the scene folder recorded in the config (e.g. the run was made on another machine)."""
     no_video: bool = False
     """Write only the PNG frames, no GIF/MP4."""
     depth_near: float | None = None
@@ -214,7 +206,7 @@ def build_cameras(cfg: RenderConfig, run: LoadedRun) -> tuple[Cameras, list[str]
         return outputs.cameras, _unique_stems(outputs.image_names)
     reference = datamanager.reference_outputs
     if isinstance(cfg, RenderOrbit):
-        if run.pipeline.model.ray_space == "ndc":
+        if run.pipeline.effects.ray_space == "ndc":
             warn("this scene uses NDC rays (forward-facing): an orbit leaves the captured frustum; try `spiral`")
         cameras = orbit_from_cameras(reference.cameras, cfg.n_frames, cfg.elevation_deg)
     elif isinstance(cfg, RenderSpiral):
@@ -230,52 +222,6 @@ def build_cameras(cfg: RenderConfig, run: LoadedRun) -> tuple[Cameras, list[str]
     else:  # pragma: no cover - tyro only builds the three modes
         raise TypeError(f"unknown render mode {type(cfg).__name__}")
     return cameras, [f"frame_{i:05d}" for i in range(len(cameras))]
-
-
-# -- progress -----------------------------------------------------------------------------------------------------
-class FrameProgress:
-    """A rich bar on a terminal; elsewhere one plain line about every 10% (no escape codes in logs and pipes)."""
-
-    def __init__(self, total: int, interactive: bool | None = None) -> None:
-        self.total = total
-        self.interactive = sys.stdout.isatty() if interactive is None else interactive
-        self.print_every = max(1, total // 10)
-        self.done = 0
-        self._t0 = time.perf_counter()
-        self._progress: Progress | None = None
-        self._task = None
-
-    def __enter__(self) -> FrameProgress:
-        self._t0 = time.perf_counter()
-        if self.interactive:
-            self._progress = Progress(
-                TextColumn("[bold]render"),
-                MofNCompleteColumn(),
-                BarColumn(),
-                TextColumn("eta"),
-                TimeRemainingColumn(),
-                console=get_console(),
-            )
-            self._progress.start()
-            self._task = self._progress.add_task("render", total=self.total)
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        if self._progress is not None:
-            self._progress.stop()
-            self._progress = None
-
-    def advance(self) -> None:
-        self.done += 1
-        if self._progress is not None:
-            self._progress.update(self._task, completed=self.done)
-        elif self.done % self.print_every == 0 or self.done == self.total:
-            elapsed = time.perf_counter() - self._t0
-            per = elapsed / self.done
-            eta = format_duration(per * (self.total - self.done))
-            print(f"frame {self.done}/{self.total} | {per:.2f} s/frame, eta {eta}", flush=True)
 
 
 # -- writing ------------------------------------------------------------------------------------------------------
@@ -345,7 +291,7 @@ def _frame_images(out: dict, height: int, width: int, outputs: list[str], cfg: R
 def render(cfg: RenderConfig) -> RenderResult:
     outputs = validate(cfg)
     console = get_console()
-    run = load_run(cfg.load_config, cfg.checkpoint, cfg.device, cfg.data)
+    run = cfg.load_run()
     cameras, stems = build_cameras(cfg, run)
     cameras = scale_cameras(cameras, cfg.resolution_scale)
     output_dir = cfg.output_dir or run.run_dir / "renders" / f"{cfg.mode}-step{run.step:06d}"
@@ -362,7 +308,7 @@ def render(cfg: RenderConfig) -> RenderResult:
         f"on {run.device}"
     )
     render_seconds = 0.0
-    with FrameProgress(len(cameras)) as progress:
+    with TaskProgress(len(cameras), unit="frame") as progress:
         for i, stem in enumerate(stems):
             origins, directions = camera_rays(cameras, i, ray_space)
             start = time.perf_counter()
@@ -373,7 +319,7 @@ def render(cfg: RenderConfig) -> RenderResult:
                 path = output_dir / name / f"{stem}.png"
                 iio.imwrite(path, image)
                 result.frames[name].append(path)
-            progress.advance()
+            progress.update(i + 1)
     result.seconds_per_frame = render_seconds / len(cameras)
 
     if not cfg.no_video:

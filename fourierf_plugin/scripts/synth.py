@@ -14,9 +14,10 @@ from typing import Literal
 
 import tyro
 
-from fourierf_plugin.data.synthetic import default_scene, load_scene, write_blender_dataset
+from fourierf_plugin.scripts.cli import run_cli, strip_verbose
+from fourierf_plugin.synthetic import default_scene, load_scene, write_blender_dataset
 from fourierf_plugin.utils.console import get_console
-from fourierf_plugin.utils.errors import fail, run_cli, strip_verbose
+from fourierf_plugin.utils.errors import fail
 
 
 @dataclass

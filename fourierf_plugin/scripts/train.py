@@ -7,30 +7,33 @@ import sys
 
 import tyro
 
-from fourierf_plugin.configs.option_checks import check_training_options
+from fourierf_plugin.engine.option_checks import check_training_options
 from fourierf_plugin.engine.trainer import Trainer, TrainerConfig
-from fourierf_plugin.utils.errors import fail, run_cli, strip_verbose
+from fourierf_plugin.method_configs import AnnotatedMethodUnion, finalize, resume_config
+from fourierf_plugin.scripts.cli import run_cli, strip_verbose
+from fourierf_plugin.utils.console import get_console
+from fourierf_plugin.utils.errors import fail
 
 
 def parse_args(args: list[str]) -> TrainerConfig:
-    """The preset chosen by the first word, with every override applied (``--data`` lands in the parser)."""
-    from fourierf_plugin.method_configs import AnnotatedMethodUnion
+    """The preset chosen by the first word, with every override applied (not yet finished: see ``build_config``)."""
+    return copy.deepcopy(tyro.cli(AnnotatedMethodUnion, args=args))  # type: ignore[arg-type]
 
-    config: TrainerConfig = copy.deepcopy(tyro.cli(AnnotatedMethodUnion, args=args))  # type: ignore[arg-type]
-    if config.data is not None:
-        config.pipeline.datamanager.dataparser.data = config.data
-    return config
+
+def build_config(config: TrainerConfig) -> tuple[TrainerConfig, list[str]]:
+    """The finished config of a new run (``finalize``) or the saved one of a run to resume, and the notes to print."""
+    if config.load_dir is not None:
+        return resume_config(config.method_name, config.load_dir), []
+    if config.data is None and str(config.pipeline.datamanager.dataparser.data) == ".":
+        fail("no scene given", "pass --data PATH_TO_SCENE (e.g. --data demo/lego_tiny), or --load-dir RUN to resume")
+    check_training_options(config)  # before any file of the scene is read
+    return finalize(config)
 
 
 def main(args: list[str] | None = None) -> None:
-    config = parse_args(strip_verbose(sys.argv[1:] if args is None else args))
-    if config.load_dir is None:
-        data = config.pipeline.datamanager.dataparser.data
-        if config.data is None and str(data) == ".":
-            fail(
-                "no scene given", "pass --data PATH_TO_SCENE (e.g. --data demo/lego_tiny), or --load-dir RUN to resume"
-            )
-    check_training_options(config)  # before anything is built or a run directory is made
+    config, notes = build_config(parse_args(strip_verbose(sys.argv[1:] if args is None else args)))
+    for note in notes:
+        get_console().print(note, soft_wrap=True)
     Trainer(config).train()
 
 

@@ -7,10 +7,13 @@ dependency.
 
 from __future__ import annotations
 
-from typing import Literal
+import sys
+from typing import TYPE_CHECKING, Literal, TypeGuard
 
 import numpy as np
-import torch
+
+if TYPE_CHECKING:
+    import torch
 
 Colormap = Literal["turbo", "viridis"]
 Background = Literal["white", "black"]
@@ -37,15 +40,24 @@ _VIRIDIS = np.array(
 _COEFFS = {"turbo": _TURBO, "viridis": _VIRIDIS}
 
 
+def _is_tensor(array: object) -> TypeGuard[torch.Tensor]:
+    """Without importing torch (the scene generator uses these helpers and never needs it): a tensor exists only
+    once torch is loaded."""
+    torch_module = sys.modules.get("torch")
+    return torch_module is not None and isinstance(array, torch_module.Tensor)
+
+
 def _numpy(array: np.ndarray | torch.Tensor) -> np.ndarray:
-    if isinstance(array, torch.Tensor):
+    if _is_tensor(array):
         return array.detach().float().cpu().numpy()
     return np.asarray(array, dtype=np.float32)
 
 
 def to_uint8(image: np.ndarray | torch.Tensor) -> np.ndarray:
-    """[0, 1] floats (any shape) to uint8, rounded; NaN becomes 0 and values outside [0, 1] are clipped."""
-    values = np.nan_to_num(_numpy(image), nan=0.0, posinf=1.0, neginf=0.0)
+    """[0, 1] floats (any shape, any channel count) to uint8: clipped to [0, 1], then ``x * 255 + 0.5`` truncated
+    (halves round up); NaN becomes 0. A float64 array is rounded in float64, anything else in float32."""
+    floats = image if isinstance(image, np.ndarray) and image.dtype == np.float64 else _numpy(image)
+    values = np.nan_to_num(floats, nan=0.0, posinf=1.0, neginf=0.0)
     return (np.clip(values, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 

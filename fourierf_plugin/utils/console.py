@@ -87,37 +87,53 @@ def format_metrics(metrics: dict[str, Any]) -> str:
     return " ".join(parts)
 
 
+def rate_text(per_second: float | None, unit: str) -> str:
+    """``6.1 steps/s`` when at least one per second, else ``2.35 s/frame``; ``-- steps/s`` when unknown."""
+    if not per_second:
+        return f"-- {unit}s/s"
+    return f"{per_second:.1f} {unit}s/s" if per_second >= 1.0 else f"{1.0 / per_second:.2f} s/{unit}"
+
+
 class _RateColumn(ProgressColumn):
-    """Iterations per second over this session (rich only samples advances, so a resumed start is not counted)."""
+    """Units per second over this session (rich only samples advances, so a resumed start is not counted)."""
+
+    def __init__(self, unit: str) -> None:
+        super().__init__()
+        self.unit = unit
 
     def render(self, task: Task) -> Text:
-        speed = task.speed
-        return Text("-- it/s" if not speed else f"{speed:.1f} it/s", style="progress.data.speed")
+        return Text(rate_text(task.speed, self.unit), style="progress.data.speed")
 
 
-class TrainingProgress:
-    """Training progress: a rich bar on a terminal, plain lines otherwise.
+class TaskProgress:
+    """Progress of a counted task (training steps, rendered frames): a rich bar on a terminal, plain lines otherwise.
 
-    ``update(step, **metrics)`` takes ``step`` = iterations completed so far (``1 .. total_steps``); steps before
-    ``start_step`` (a resumed run) count as done but not towards the speed/ETA, which only measure this session.
+    ``update(done, **metrics)`` takes the count completed so far (``1 .. total``); a count before ``start`` (a
+    resumed run) is done but not counted towards the speed and ETA, which measure this session only. Plain output
+    prints every ``print_every`` (default: every 5 %) and at least every ``quiet_seconds``, so a log never goes silent.
     """
 
     def __init__(
         self,
-        total_steps: int,
-        start_step: int = 0,
+        total: int,
+        start: int = 0,
+        unit: str = "step",
         interactive: bool | None = None,
         print_every: int | None = None,
+        quiet_seconds: float = 30.0,
     ) -> None:
-        self.total_steps = max(0, int(total_steps))
-        self.start_step = min(max(0, int(start_step)), self.total_steps)
+        self.total = max(0, int(total))
+        self.start_count = min(max(0, int(start)), self.total)
+        self.unit = unit
         self.interactive = sys.stdout.isatty() if interactive is None else interactive
-        self.print_every = max(1, self.total_steps // 20) if print_every is None else max(1, int(print_every))
+        self.print_every = max(1, self.total // 20) if print_every is None else max(1, int(print_every))
+        self.quiet_seconds = quiet_seconds
         self._progress: Progress | None = None
         self._task_id: Any = None
         self._t0: float | None = None
+        self._last_print = 0.0
 
-    def __enter__(self) -> TrainingProgress:
+    def __enter__(self) -> TaskProgress:
         self.start()
         return self
 
@@ -130,21 +146,21 @@ class TrainingProgress:
         """Start the clock (and the bar); ``update`` calls it if the object is used without ``with``."""
         if self._t0 is not None:
             return
-        self._t0 = time.perf_counter()
+        self._t0 = self._last_print = time.perf_counter()
         if self.interactive:
             self._progress = Progress(
-                TextColumn("[bold]iter"),
+                TextColumn(f"[bold]{self.unit}"),
                 MofNCompleteColumn(),
                 BarColumn(),
                 TextColumn("{task.fields[metrics]}"),
-                _RateColumn(),
+                _RateColumn(self.unit),
                 TextColumn("eta"),
                 TimeRemainingColumn(),
                 console=get_console(),
             )
             self._progress.start()
             self._task_id = self._progress.add_task(
-                "train", total=max(self.total_steps, 1), completed=self.start_step, metrics=""
+                self.unit, total=max(self.total, 1), completed=self.start_count, metrics=""
             )
 
     def close(self) -> None:
@@ -152,28 +168,30 @@ class TrainingProgress:
             self._progress.stop()
             self._progress = None
 
-    def update(self, step: int, **metrics: float) -> None:
-        """Report that ``step`` iterations are done, with the latest metrics (e.g. ``loss``, ``psnr``, ``f``)."""
+    def update(self, done: int, **metrics: float) -> None:
+        """Report that ``done`` units are complete, with the latest metrics (e.g. ``loss``, ``psnr``, ``f``)."""
         self.start()
-        step = min(max(0, int(step)), self.total_steps)
+        done = min(max(0, int(done)), self.total)
         if self._progress is not None:
-            self._progress.update(self._task_id, completed=step, metrics=format_metrics(metrics))
+            self._progress.update(self._task_id, completed=done, metrics=format_metrics(metrics))
             return
-        if step % self.print_every == 0 or step >= self.total_steps:
-            print(self.status_line(step, metrics), file=sys.stdout, flush=True)
+        now = time.perf_counter()
+        if done % self.print_every == 0 or done >= self.total or now - self._last_print >= self.quiet_seconds:
+            self._last_print = now
+            print(self.status_line(done, metrics), file=sys.stdout, flush=True)
 
-    def status_line(self, step: int, metrics: dict[str, Any]) -> str:
-        """``step 400/800 (50%) loss 0.0123 psnr 21.45 f 0.650 | 6.1 it/s, eta 1m05s`` (no escape codes)."""
-        step = min(max(0, int(step)), self.total_steps)
-        percent = 100.0 if self.total_steps == 0 else 100.0 * step / self.total_steps
+    def status_line(self, done: int, metrics: dict[str, Any]) -> str:
+        """``step 400/800 (50%) loss 0.0123 psnr 21.45 f 0.650 | 6.1 steps/s, eta 1m05s`` (no escape codes)."""
+        done = min(max(0, int(done)), self.total)
+        percent = 100.0 if self.total == 0 else 100.0 * done / self.total
         elapsed = 0.0 if self._t0 is None else time.perf_counter() - self._t0
-        done_here = step - self.start_step
+        done_here = done - self.start_count
         if done_here > 0 and elapsed > 0:
             rate = done_here / elapsed
-            timing = f"{rate:.1f} it/s, eta {format_duration((self.total_steps - step) / rate)}"
+            timing = f"{rate_text(rate, self.unit)}, eta {format_duration((self.total - done) / rate)}"
         else:
-            timing = "-- it/s, eta ?"
-        text = f"step {step}/{self.total_steps} ({percent:.0f}%)"
+            timing = f"{rate_text(None, self.unit)}, eta ?"
+        text = f"{self.unit} {done}/{self.total} ({percent:.0f}%)"
         shown = format_metrics(metrics)
         if shown:
             text += " " + shown
@@ -211,3 +229,12 @@ def append_jsonl(path: Path, record: dict) -> None:
             f"cannot append to the log file {path}: {err}",
             fix="free disk space, or choose a writable --output-dir",
         ) from err
+
+
+def write_json(path: Path, payload: Any) -> None:
+    """Write ``payload`` as indented JSON, atomically (a temp file renamed into place), creating the folder."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(_jsonable(payload), indent=2) + "\n")
+    tmp.replace(path)

@@ -1,6 +1,6 @@
 """Geometry metrics: Chamfer distance between point sets, surface samples of a mesh, connected pieces.
 
-Why these: an exported mesh is judged against a known surface (``fourierf_plugin.data.synthetic.sample_surface``)
+Why these: an exported mesh is judged against a known surface (``fourierf_plugin.synthetic.sample_surface``)
 by sampling both and comparing nearest neighbours; floaters show up as extra connected components.
 """
 

@@ -1,0 +1,145 @@
+"""Range checks of the training options, run before anything is built or written.
+
+Why: tyro checks types only. A nonsense value (``--pipeline.model.fourier.f0-density 1.5``, ``--steps-per-save 0``,
+a negative step ratio) otherwise ends in a ValueError or ZeroDivisionError deep inside the first iteration, after a
+run directory was made, or worse trains silently on garbage (a negative distance scale). Each rule names the flag,
+what it needs and an example, so the message is the fix.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from fourierf_plugin.field_components.schedules import steps_from_fractions
+from fourierf_plugin.utils.errors import fail
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _integer(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def at_least(low: float) -> Callable[[Any], bool]:
+    return lambda v: _number(v) and v >= low
+
+
+def positive(v: Any) -> bool:
+    return _number(v) and v > 0
+
+
+def int_at_least(low: int) -> Callable[[Any], bool]:
+    return lambda v: _integer(v) and v >= low
+
+
+def within(low: float, high: float) -> Callable[[Any], bool]:
+    return lambda v: _number(v) and low <= v <= high
+
+
+def each(rule: Callable[[Any], bool]) -> Callable[[Any], bool]:
+    return lambda v: isinstance(v, (tuple, list)) and all(rule(x) for x in v)
+
+
+def optional(rule: Callable[[Any], bool]) -> Callable[[Any], bool]:
+    return lambda v: v is None or rule(v)
+
+
+@dataclass(frozen=True)
+class Rule:
+    path: str
+    """Attribute path in the trainer config; the flag is ``--`` + the path with ``_`` as ``-``."""
+    ok: Callable[[Any], bool]
+    needs: str
+    example: str
+
+
+_MODEL = "pipeline.model"
+_ACCEL = f"{_MODEL}.accel"
+RULES: tuple[Rule, ...] = (
+    Rule("steps_per_save", int_at_least(1), "an integer >= 1", "1000"),
+    Rule("log_every", int_at_least(1), "an integer >= 1", "50"),
+    Rule("threads", optional(int_at_least(1)), "an integer >= 1 (or omitted for torch's default)", "2"),
+    Rule("pipeline.datamanager.rays_per_batch", int_at_least(1), "an integer >= 1", "4096"),
+    Rule(f"{_MODEL}.fourier.f0_density", within(0.0, 1.0), "a cutoff in [0, 1] (0 keeps only DC, 1 all)", "0.3"),
+    Rule(f"{_MODEL}.fourier.f0_color", within(0.0, 1.0), "a cutoff in [0, 1] (0 keeps only DC, 1 all)", "0.3"),
+    Rule(f"{_MODEL}.fourier.ramp_fraction", at_least(0.0), "a fraction of the run >= 0", "0.2"),
+    Rule(f"{_MODEL}.fourier.plane_leakage", at_least(0.0), "a weight >= 0", "0"),
+    Rule(f"{_MODEL}.step_ratio", positive, "a number of voxels > 0", "0.5"),
+    Rule(f"{_MODEL}.distance_scale", positive, "a number > 0", "25"),
+    Rule(f"{_MODEL}.occupancy_threshold", within(0.0, 1.0), "an alpha in [0, 1]", "1e-4"),
+    Rule(f"{_MODEL}.weight_threshold", within(0.0, 1.0), "a weight in [0, 1]", "1e-4"),
+    Rule(f"{_MODEL}.tv_weight_density", at_least(0.0), "a weight >= 0", "1.0"),
+    Rule(f"{_MODEL}.tv_weight_appearance", at_least(0.0), "a weight >= 0", "1.0"),
+    Rule(f"{_MODEL}.l1_weight_initial", at_least(0.0), "a weight >= 0", "8e-5"),
+    Rule(f"{_MODEL}.l1_weight_rest", at_least(0.0), "a weight >= 0", "4e-5"),
+    Rule(f"{_MODEL}.occlusion_weight", at_least(0.0), "a weight >= 0", "0.01"),
+    Rule(f"{_MODEL}.occlusion_fraction", within(1e-9, 1.0), "a fraction of the ray in (0, 1]", "0.15625"),
+    Rule(f"{_ACCEL}.render_chunk_rays", int_at_least(1), "an integer >= 1", "2048"),
+    Rule(f"{_ACCEL}.early_stop_transmittance", within(0.0, 0.5), "a transmittance in [0, 0.5]", "1e-4"),
+    Rule(f"{_ACCEL}.early_stop_segment", int_at_least(1), "an integer >= 1", "128"),
+    Rule(f"{_ACCEL}.checkpoint_above", int_at_least(0), "a sample count >= 0 (0 = never)", "65536"),
+    Rule(f"{_ACCEL}.checkpoint_chunk", int_at_least(1), "an integer >= 1", "32768"),
+    Rule(f"{_ACCEL}.dense_train_max_vertices", int_at_least(0), "a vertex count >= 0 (0 = never)", "4194304"),
+    Rule(f"{_ACCEL}.dense_render_max_mb", at_least(0.0), "a size in MB >= 0 (0 = never)", "512"),
+    Rule(f"{_MODEL}.field.n_voxels_init", int_at_least(8), "a voxel count >= 8 (2 per axis)", "2097152"),
+    Rule(f"{_MODEL}.field.n_voxels_final", int_at_least(8), "a voxel count >= 8 (2 per axis)", "27000000"),
+    Rule(f"{_MODEL}.field.density_components", each(int_at_least(1)), "component counts >= 1", "16 16 16"),
+    Rule(f"{_MODEL}.field.appearance_components", each(int_at_least(1)), "component counts >= 1", "48 48 48"),
+    Rule(f"{_MODEL}.field.appearance_dim", int_at_least(1), "an integer >= 1", "27"),
+    Rule(f"{_MODEL}.field.hidden_dim", int_at_least(1), "an integer >= 1", "128"),
+    Rule(f"{_MODEL}.field.init_scale", optional(positive), "a standard deviation > 0 (or omitted)", "0.1"),
+    Rule("optimizer.lr_grids", positive, "a learning rate > 0", "0.02"),
+    Rule("optimizer.lr_networks", positive, "a learning rate > 0", "1e-3"),
+    Rule("optimizer.betas", each(within(0.0, 1.0 - 1e-12)), "two numbers in [0, 1)", "0.9 0.98"),
+    Rule("optimizer.weight_decay", at_least(0.0), "a number >= 0", "0.2"),
+    Rule("optimizer.lr_decay_ratio", positive, "a ratio > 0 (1 = no decay)", "0.1"),
+)
+
+
+def flag_of(path: str) -> str:
+    return "--" + path.replace("_", "-")
+
+
+def _lookup(config: Any, path: str) -> Any:
+    value = config
+    for part in path.split("."):
+        value = getattr(value, part)
+    return value
+
+
+def _show(value: Any) -> str:
+    return " ".join(map(str, value)) if isinstance(value, (tuple, list)) else str(value)
+
+
+EVENT_SCHEDULES = (f"{_MODEL}.field.upsample_fractions", f"{_MODEL}.occupancy_update_fractions")
+"""Events placed at fractions of the run: each must land on a step inside it."""
+
+
+def check_training_options(config: Any) -> None:
+    """Raise a UserError for the first option outside its valid range (a ``TrainerConfig`` is expected)."""
+    for rule in RULES:
+        value = _lookup(config, rule.path)
+        if not rule.ok(value):
+            flag = flag_of(rule.path)
+            fail(f"{flag} {_show(value)} is out of range: it must be {rule.needs}", f"pass e.g. {flag} {rule.example}")
+    iters = config.max_num_iterations
+    if not (_integer(iters) and iters >= 1):
+        fail(f"--max-num-iterations must be at least 1, got {iters}", "pass a positive number")
+    for path in EVENT_SCHEDULES:
+        fractions = _lookup(config, path)
+        try:
+            steps_from_fractions(fractions, iters)
+        except ValueError as err:
+            flag = flag_of(path)
+            inside = [f for f in fractions if 0 < f < 1]
+            needed = f" (at least {max(2, math.ceil(1 / min(inside)))} here)" if inside else ""
+            fail(
+                f"{flag} {_show(fractions)} does not fit a run of {iters} iterations ({err})",
+                "use fractions strictly between 0 and 1 and a --max-num-iterations long enough to place them"
+                f"{needed}, or pass {flag} with no value to disable them",
+            )

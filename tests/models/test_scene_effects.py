@@ -1,0 +1,281 @@
+"""What the model builds for each scene effect, through pipelines built the way ``fourierf-train`` builds them.
+
+Blender pipelines must run nothing NDC-specific; LLFF pipelines get NDC rays, a black eval background and FreeNeRF's
+occlusion term; ``--pipeline.effects.*`` overrides win over the declaration. Plus the pieces those effects switch on:
+the occlusion penalty and its weight, and Floaters-No-More gradient scaling (density and colour gradients scaled in
+training only, the forward untouched).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from pathlib import Path
+
+import pytest
+import torch
+
+from fourierf_plugin.data.scene_effects import SceneEffects
+from fourierf_plugin.engine.optimizers import build_optimizer
+from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig
+from fourierf_plugin.method_configs import all_methods
+from fourierf_plugin.method_configs.scene_presets import apply_real_scene_preset
+from fourierf_plugin.model_components.gradient_scaling import floaters_scale, scale_gradient
+from fourierf_plugin.model_components.rendering import composite_target
+from fourierf_plugin.models.fourierf import FourieRFModel, FourieRFModelConfig, occlusion_penalty
+from fourierf_plugin.pipelines.base import Pipeline
+from fourierf_plugin.scripts.train import build_config, parse_args
+from tests.helpers import TINY_FLAGS, TINY_SCENE, ndc_model
+from tests.scenes import write_llff_scene
+
+ITERS = 50
+
+
+@pytest.fixture(scope="module")
+def llff_scene(tmp_path_factory) -> Path:
+    """A 20-image synthetic LLFF scene with 8x6 images (tests/scenes.py)."""
+    return write_llff_scene(tmp_path_factory.mktemp("llff") / "scene")
+
+
+def pipeline_for(data: Path, out: Path, *flags: str) -> Pipeline:
+    """The pipeline of a tiny run on ``data`` with ``flags``, from the config ``fourierf-train`` would finish."""
+    parser = ["llff-data", "--num-views", "3"] if (data / "poses_bounds.npy").exists() else []
+    args = ["fourierf-vm", "--data", str(data), "--output-dir", str(out), "--max-num-iterations", str(ITERS)]
+    config, _ = build_config(parse_args([*args, *TINY_FLAGS, *flags, *parser]))
+    generator = torch.Generator().manual_seed(0)
+    return config.pipeline.setup(device=torch.device("cpu"), max_iters=ITERS, generator=generator)
+
+
+def forbid(monkeypatch, module: str, name: str) -> None:
+    """Make ``module.name`` raise if anything calls it."""
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError(f"{name} must not run for this scene")
+
+    monkeypatch.setattr(f"{module}.{name}", forbidden)
+
+
+# -- pipelines ------------------------------------------------------------------------------------------------------
+
+
+def test_blender_pipeline_runs_nothing_ndc_specific(tmp_path: Path, monkeypatch) -> None:
+    forbid(monkeypatch, "fourierf_plugin.data.datamanager", "ndc_rays")
+    forbid(monkeypatch, "fourierf_plugin.models.fourierf", "ndc_samples")
+    forbid(monkeypatch, "fourierf_plugin.models.fourierf", "occlusion_penalty")
+    pipeline = pipeline_for(TINY_SCENE, tmp_path)
+    assert pipeline.effects == SceneEffects("white", "euclidean", False, False) == pipeline.model.effects
+    assert pipeline.datamanager.ray_space == "euclidean"
+    rays = pipeline.datamanager.train_rays
+    torch.testing.assert_close(rays.directions.norm(dim=-1), torch.ones(rays.directions.shape[0]))
+    loss, metrics = pipeline.train_step(0)
+    assert "occlusion" not in metrics and torch.isfinite(loss)
+    view = next(pipeline.render_views("test", 0))
+    assert bool(torch.isfinite(view.rgb).all())
+
+
+def test_llff_pipeline_gets_ndc_rays_a_black_eval_background_and_the_occlusion_term(
+    tmp_path: Path, llff_scene: Path, monkeypatch
+) -> None:
+    forbid(monkeypatch, "fourierf_plugin.models.fourierf", "box_samples")
+    pipeline = pipeline_for(llff_scene, tmp_path)
+    model = pipeline.model
+    assert model.effects == SceneEffects("none", "ndc", False, True) == pipeline.effects
+    assert pipeline.datamanager.ray_space == "ndc"
+    rays = pipeline.datamanager.train_rays
+    torch.testing.assert_close(rays.origins[:, 2], torch.full_like(rays.origins[:, 2], -1.0))
+    torch.testing.assert_close(rays.directions[:, 2], torch.full_like(rays.directions[:, 2], 2.0))
+
+    model.prepare(0)
+    out = model.train()(rays.origins[:64], rays.directions[:64])
+    assert "occlusion" in out and math.isfinite(out["occlusion"].item())
+    bg = out["background"]
+    assert bool((bg == 0).all() or (bg == 1).all()), "photos (background none) train on black or white per batch"
+    loss, metrics = pipeline.train_step(0)
+    assert "occlusion" in metrics and math.isfinite(metrics["occlusion"]) and torch.isfinite(loss)
+
+    assert model.effects.eval_background == "black"
+    with torch.no_grad():
+        assert torch.equal(model.eval()(rays.origins[:8], rays.directions[:8])["background"], torch.zeros(3))
+    view = next(pipeline.render_views("test", 0))
+    assert bool(torch.isfinite(view.rgb).all()) and tuple(view.rgb.shape) == (6, 8, 3)
+    target = composite_target(view.view.rays.rgba, torch.zeros(3)).view(6, 8, 3)
+    torch.testing.assert_close(view.target, target)
+
+
+def test_the_occlusion_override_removes_the_term(tmp_path: Path, llff_scene: Path, monkeypatch) -> None:
+    forbid(monkeypatch, "fourierf_plugin.models.fourierf", "occlusion_penalty")
+    pipeline = pipeline_for(llff_scene, tmp_path, "--pipeline.effects.occlusion-regularization", "False")
+    _, metrics = pipeline.train_step(0)
+    assert "occlusion" not in metrics
+    assert pipeline.model.effects == SceneEffects("none", "ndc", False, False), "the other declared effects stay"
+
+
+def test_the_background_override_reaches_training_and_eval(tmp_path: Path, llff_scene: Path) -> None:
+    pipeline = pipeline_for(llff_scene, tmp_path, "--pipeline.effects.background", "white")
+    rays = pipeline.datamanager.train_rays
+    model = pipeline.model
+    model.prepare(0)
+    for mode in (model.train(), model.eval()):
+        with torch.no_grad():
+            assert bool((mode(rays.origins[:8], rays.directions[:8])["background"] == 1).all())
+
+
+def test_the_view_dependence_override_gives_the_field_view_directions(tmp_path: Path, llff_scene: Path) -> None:
+    pipeline = pipeline_for(llff_scene, tmp_path, "--pipeline.effects.view-dependent", "True")
+    assert pipeline.model.effects.view_dependent and pipeline.model.field.decoder.view_dependent
+    seen = []
+    rgb = pipeline.model.field.rgb
+    pipeline.model.field.rgb = lambda xyz, dirs: seen.append(dirs) or rgb(xyz, dirs)  # type: ignore[method-assign]
+    pipeline.train_step(0)
+    assert seen and all(d is not None for d in seen)
+    torch.testing.assert_close(seen[0].norm(dim=-1), torch.ones(seen[0].shape[0]))
+
+
+# Regression: with a plain black background and softplus(x - 10) densities, every weight of a fresh LLFF model is
+# below the 1e-4 shading threshold, so no colour is evaluated and d rgb / d w = c - bg = 0: the photometric loss gave
+# the density grid exactly zero gradient and training never started. Photos now declare background "none" (trained
+# on black or white at random per batch, TensoRF's LLFF term), which gives the density a gradient from step 0.
+def test_fresh_llff_model_learns_a_constant_colour() -> None:
+    """80 steps on a grey target seen by a camera at the origin: the (black-evaluated) render must turn grey."""
+    config = copy.deepcopy(all_methods["fourierf-vm"])
+    apply_real_scene_preset(config, all_methods["fourierf-vm"])  # what finalize does on a forward-facing scene
+    m = config.pipeline.model
+    m.field.n_voxels_init = m.field.n_voxels_final = 4096
+    m.field.upsample_fractions, m.occupancy_update_fractions = (), ()
+    torch.manual_seed(0)
+    model = ndc_model(m, max_iters=1000)
+    optimizer = build_optimizer(config.optimizer, model.param_groups())
+    origins, directions = parallel_ndc_rays(256)
+    target = torch.cat([torch.full((256, 3), 0.5), torch.ones(256, 1)], dim=-1)
+    model.train()
+    for step in range(80):
+        model.prepare(step)
+        loss = torch.stack(list(model.loss_dict(model(origins, directions), target, step).values()))
+        optimizer.zero_grad()
+        loss.sum().backward()
+        optimizer.step()
+    rgb = model.render_rays(origins, directions, 80)["rgb"]
+    mse = float(((rgb - 0.5) ** 2).mean())
+    assert mse < 0.01, f"after 80 steps the render is still {rgb.mean():.3f} on average (mse {mse:.3f} to grey)"
+
+
+def parallel_ndc_rays(n: int, seed: int = 1) -> tuple[torch.Tensor, torch.Tensor]:
+    """NDC rays of a camera at the origin looking down -z: parallel, o' on the near face, d' = (0, 0, 2)."""
+    g = torch.Generator().manual_seed(seed)
+    origins = torch.cat([(torch.rand(n, 2, generator=g) - 0.5) * 2, -torch.ones(n, 1)], dim=-1)
+    return origins, torch.tensor([[0.0, 0.0, 2.0]]).expand(n, 3)
+
+
+# -- occlusion penalty ----------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("k", "m"), [(128, 20), (64, 10), (256, 40), (7, 1)])
+def test_occlusion_penalty_sums_the_first_m_samples(k: int, m: int) -> None:
+    sigma = torch.arange(3 * k, dtype=torch.float64).reshape(3, k) / k
+    expected = sigma[:, :m].sum(dim=-1).mean() / k  # = mean over rays and all K samples of σ_k 1[k < M]
+    torch.testing.assert_close(occlusion_penalty(sigma, 20 / 128), expected)
+    masked = sigma * (torch.arange(k) < m)
+    torch.testing.assert_close(occlusion_penalty(sigma, 20 / 128), masked.mean())
+
+
+def test_occlusion_penalty_ignores_samples_past_m() -> None:
+    sigma = torch.zeros(4, 128)
+    sigma[:, 20:] = 100.0
+    assert occlusion_penalty(sigma, 20 / 128).item() == 0.0
+    sigma[:, 19] = 128.0
+    assert occlusion_penalty(sigma, 20 / 128).item() == pytest.approx(1.0)
+
+
+def test_occlusion_penalty_weight_in_the_loss(tmp_path: Path, llff_scene: Path) -> None:
+    pipeline = pipeline_for(llff_scene, tmp_path)
+    model = pipeline.model
+    rays = pipeline.datamanager.train_rays
+    model.prepare(0)
+    out = model.train()(rays.origins[:32], rays.directions[:32])
+    terms = model.loss_dict(out, rays.rgba[:32], 0)
+    torch.testing.assert_close(terms["occlusion"], model.config.occlusion_weight * out["occlusion"])
+    assert model.config.occlusion_weight == 0.01
+
+
+def test_no_occlusion_term_at_eval() -> None:
+    model = ndc_model(FourieRFModelConfig(field=FieldConfig(n_voxels_init=4096, n_voxels_final=13824)))
+    model.prepare(0)
+    with torch.no_grad():
+        assert "occlusion" not in model.eval()(*parallel_ndc_rays(4))
+
+
+# -- gradient scaling -----------------------------------------------------------------------------------------------
+
+
+def test_scale_gradient_is_identity_forward_and_scales_backward() -> None:
+    x = torch.tensor([1.0, -2.0, 3.0], requires_grad=True)
+    scale = torch.tensor([0.5, 0.0, 1.0])
+    y = scale_gradient(x, scale)
+    assert torch.equal(y.detach(), x.detach())
+    (y * torch.tensor([1.0, 2.0, 3.0])).sum().backward()
+    torch.testing.assert_close(x.grad, torch.tensor([0.5, 0.0, 3.0]))
+
+
+def test_scale_gradient_broadcasts_over_colour_channels() -> None:
+    x = torch.ones(2, 3, 3, requires_grad=True)
+    scale = torch.tensor([[0.25, 1.0, 0.0], [1.0, 1.0, 0.5]]).unsqueeze(-1)
+    scale_gradient(x, scale).sum().backward()
+    torch.testing.assert_close(x.grad, scale.expand(2, 3, 3))
+
+
+def test_floaters_scale_is_clamped_t_squared() -> None:
+    t = torch.tensor([0.0, 0.5, 1.0, 2.0, 6.0])
+    torch.testing.assert_close(floaters_scale(t), torch.tensor([0.0, 0.25, 1.0, 1.0, 1.0]))
+
+
+def floaters_model(floaters: bool) -> FourieRFModel:
+    # density_shift 0 gives softplus(raw) ~ 0.7: enough weight on every sample that colours are shaded too
+    cfg = FourieRFModelConfig(
+        field=FieldConfig(n_voxels_init=4096, n_voxels_final=13824, density_shift=0.0),
+        floaters_gradient_scaling=floaters,
+    )
+    torch.manual_seed(0)  # the decoder's layers draw from the global RNG
+    return ndc_model(cfg)
+
+
+def grads(floaters: bool, training: bool) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+    """Parameter gradients of an MSE on 128 NDC rays (same rays, same jitter with and without scaling)."""
+    model = floaters_model(floaters)
+    g = torch.Generator().manual_seed(1)
+    origins = torch.cat([(torch.rand(128, 2, generator=g) - 0.5) * 2, -torch.ones(128, 1)], dim=-1)
+    directions = torch.cat([(torch.rand(128, 2, generator=g) - 0.5) * 0.2, torch.full((128, 1), 2.0)], dim=-1)
+    target = torch.rand(128, 3, generator=g)
+    model.prepare(0)
+    out = model.train(training)(origins, directions)
+    ((out["rgb"] - target) ** 2).mean().backward()
+    found = {name: p.grad.detach().clone() for name, p in model.named_parameters() if p.grad is not None}
+    return found, out["rgb"].detach()
+
+
+def test_floaters_scaling_reaches_density_and_colour() -> None:
+    """Same batch and jitter with and without: identical forward, different density AND appearance gradients."""
+    plain, rgb_plain = grads(False, training=True)
+    scaled, rgb_scaled = grads(True, training=True)
+    torch.testing.assert_close(rgb_plain, rgb_scaled, rtol=0, atol=0)
+    assert plain.keys() == scaled.keys()
+    density = [n for n in plain if n.startswith("field.density_grid")]
+    appearance = [n for n in plain if n.startswith("field.appearance_grid")]
+    assert density and appearance
+    for names, what in ((density, "density"), (appearance, "appearance")):
+        for n in names:
+            assert torch.isfinite(scaled[n]).all()
+        assert any(not torch.allclose(plain[n], scaled[n]) for n in names), f"{what} gradients are not scaled"
+    # every NDC sample has t < 1, so the scale t² < 1 shrinks the total gradient
+    total = lambda g: sum(float(v.norm() ** 2) for v in g.values())  # noqa: E731
+    assert total(scaled) < total(plain)
+
+
+def test_floaters_scaling_is_off_by_default_and_at_eval() -> None:
+    """At eval (no jitter) the same rays give the same colours and exactly the same gradients with the flag on."""
+    assert FourieRFModelConfig().floaters_gradient_scaling is False
+    plain, rgb_plain = grads(False, training=False)
+    scaled, rgb_scaled = grads(True, training=False)
+    assert torch.equal(rgb_plain, rgb_scaled)
+    assert plain.keys() == scaled.keys() and plain
+    for name, grad in plain.items():
+        assert torch.equal(scaled[name], grad), name

@@ -1,0 +1,175 @@
+"""fourierf-render on one tiny run: frames, animations, progress output and the errors of every mode.
+
+The colormaps it uses are tested in tests/utils/test_colormaps.py, its progress display in tests/utils/test_console.py.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import re
+import subprocess
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+from PIL import Image, ImageSequence
+
+from fourierf_plugin.scripts.cli import EXIT_USER_ERROR
+from fourierf_plugin.scripts.render import OUTPUT_NAMES, RenderOrbit, main, spiral_bounds
+from tests.helpers import (
+    REPO_ROOT,
+    TINY_IMAGE_SIZE,
+    TINY_TEST_VIEWS,
+    cli_exit_code,
+    train_tiny,
+    venv_script,
+)
+
+ITERS = 20
+
+
+# -- fourierf-render on one tiny run ---------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def run_config(tmp_path_factory) -> Path:
+    """config.json of one tiny fourierf-vm run on the bundled scene (16³ -> 24³, 20 iterations)."""
+    _, run_dir = train_tiny(tmp_path_factory.mktemp("runs"), iters=ITERS)
+    return run_dir / "config.json"
+
+
+def _check_gif(path: Path, n_frames: int, height: int, width: int, fps: float = 24.0) -> None:
+    """A GIF of frames of the given size lasting ``n_frames / fps`` seconds.
+
+    The frame count itself is not checked: Pillow merges identical consecutive frames (an untrained model renders
+    every view blank) into one frame with the summed duration, which plays the same.
+    """
+    with Image.open(path) as gif:
+        durations = []
+        for frame in ImageSequence.Iterator(gif):
+            assert frame.size == (width, height)
+            durations.append(frame.info["duration"])
+    assert 1 <= len(durations) <= n_frames
+    assert sum(durations) == pytest.approx(n_frames * 1000.0 / fps, abs=10 * n_frames), "GIF delays are 10 ms units"
+
+
+def test_dataset_mode_writes_every_test_view(run_config: Path, tmp_path: Path) -> None:
+    out = tmp_path / "dataset"
+    result = main(["dataset", "--load-config", str(run_config), "--output-dir", str(out), "--resolution-scale", "0.3"])
+    height, width = (round(s * 0.3) for s in TINY_IMAGE_SIZE)
+    assert (result.height, result.width, result.step) == (height, width, ITERS)
+    for name in OUTPUT_NAMES:
+        frames = sorted((out / name).glob("*.png"))
+        assert len(frames) == TINY_TEST_VIEWS
+        assert {p.stem for p in frames} == {f"r_{25 * i}" for i in range(TINY_TEST_VIEWS)}, "named after the views"
+        image = iio.imread(frames[0])
+        assert image.shape == (height, width, 3) and image.dtype == np.uint8
+        _check_gif(out / f"{name}.gif", TINY_TEST_VIEWS, height, width)
+    assert result.seconds_per_frame > 0
+
+
+def test_orbit_writes_frames_at_the_scaled_size(run_config: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "orbit"
+    args = ["orbit", "--load-config", str(run_config), "--output-dir", str(out)]
+    result = main([*args, "--n-frames", "3", "--resolution-scale", "0.25", "--outputs", "rgb", "depth", "--fps", "10"])
+    written = sorted(p.name for p in out.iterdir() if p.suffix != ".mp4")  # MP4 only with the video extra
+    assert written == ["depth", "depth.gif", "rgb", "rgb.gif"]
+    for name in ("rgb", "depth"):
+        frames = sorted((out / name).glob("*.png"))
+        assert [p.name for p in frames] == [f"frame_{i:05d}.png" for i in range(3)]
+        for p in frames:
+            image = iio.imread(p)
+            assert image.shape == (25, 25, 3) and image.dtype == np.uint8
+        _check_gif(out / f"{name}.gif", 3, 25, 25, fps=10.0)
+    gifs = [p for p in result.animations if p.suffix == ".gif"]
+    assert gifs == [out / "rgb.gif", out / "depth.gif"]
+    printed = capsys.readouterr().out
+    # Plain progress off a TTY; the rate reads frames/s or s/frame depending on the machine's speed.
+    assert re.search(r"^frame 3/3 \(100%\) \| ([\d.]+ frames/s|[\d.]+ s/frame), eta ", printed, re.MULTILINE)
+    assert "\x1b" not in printed
+    if importlib.util.find_spec("imageio_ffmpeg") is None:
+        assert "no MP4" in printed, "says why there is no video"
+
+
+def test_mp4_when_the_ffmpeg_plugin_is_installed(run_config: Path, tmp_path: Path) -> None:
+    pytest.importorskip("imageio_ffmpeg", reason="the optional video extra (imageio-ffmpeg) is not installed")
+    import imageio.v2 as iio2
+
+    args = ["orbit", "--load-config", str(run_config), "--output-dir", str(tmp_path), "--outputs", "rgb"]
+    result = main([*args, "--n-frames", "2", "--resolution-scale", "0.25"])
+    assert tmp_path / "rgb.mp4" in result.animations
+    with iio2.get_reader(tmp_path / "rgb.mp4") as reader:
+        assert reader.count_frames() == 2
+        assert reader.get_meta_data()["size"] == (26, 26), "25 px padded to even for H.264"
+
+
+def test_spiral_defaults_to_the_run_directory_and_no_video_skips_gifs(run_config: Path) -> None:
+    args = ["spiral", "--load-config", str(run_config), "--n-frames", "3", "--resolution-scale", "0.2", "--no-video"]
+    result = main(args)
+    assert result.output_dir == run_config.parent / "renders" / f"spiral-step{ITERS:06d}"
+    assert result.animations == [] and not list(result.output_dir.glob("*.gif"))
+    for name in OUTPUT_NAMES:
+        frames = sorted((result.output_dir / name).glob("frame_*.png"))
+        assert len(frames) == 3 and iio.imread(frames[-1]).shape == (20, 20, 3)
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["orbit", "--n-frames", "0"], "--n-frames"),
+        (["spiral", "--n-frames", "-2"], "--n-frames"),
+        (["orbit", "--resolution-scale", "0"], "--resolution-scale"),
+        (["dataset", "--resolution-scale", "-0.5"], "--resolution-scale"),
+        (["orbit", "--outputs", "rgb", "normals"], "normals"),
+        (["orbit", "--elevation-deg", "120"], "--elevation-deg"),
+        (["orbit", "--fps", "0"], "--fps"),
+        (["spiral", "--near", "0", "--far", "1", "--n-frames", "1"], "spiral"),
+    ],
+)
+def test_bad_options_exit_2_with_a_message(run_config: Path, tmp_path: Path, capsys, extra, message) -> None:
+    args = [extra[0], "--load-config", str(run_config), "--output-dir", str(tmp_path / "out"), *extra[1:]]
+    assert cli_exit_code(main, args) == EXIT_USER_ERROR
+    err = capsys.readouterr().err
+    assert "error:" in err and message in err and "Traceback" not in err
+
+
+def test_bad_paths_exit_2(run_config: Path, tmp_path: Path, capsys) -> None:
+    a_file = tmp_path / "taken"
+    a_file.write_text("not a directory")
+    cases = [
+        (["orbit", "--load-config", str(run_config), "--output-dir", str(a_file)], "existing file"),
+        (["orbit", "--load-config", str(tmp_path / "nope" / "config.json")], "config file not found"),
+        (["orbit", "--load-config", str(run_config), "--checkpoint", str(tmp_path / "x.ckpt")], "does not exist"),
+    ]
+    for args, message in cases:
+        assert cli_exit_code(main, args) == EXIT_USER_ERROR
+        assert message in capsys.readouterr().err
+
+
+def test_spiral_bounds_use_metric_depths_of_ndc_scenes() -> None:
+    assert spiral_bounds(2.0, 6.0, None) == (2.0, 6.0), "euclidean scenes: their own near/far"
+    near, far = spiral_bounds(0.0, 1.0, (1.0 / 0.75, 10.0))  # LLFF: NDC near/far, metric content depths
+    assert near == pytest.approx(1.2) and far == pytest.approx(50.0), "LLFF's 0.9 x closest and 5 x farthest"
+
+
+def test_subcommands_have_help(capsys) -> None:
+    for mode in ("dataset", "orbit", "spiral"):
+        with pytest.raises(SystemExit) as info:
+            main([mode, "--help"])
+        assert info.value.code == 0
+        assert "--load-config" in capsys.readouterr().out
+    assert RenderOrbit(load_config=Path("c.json")).mode == "orbit"
+
+
+def test_console_script_reports_a_missing_config_cleanly(tmp_path: Path) -> None:
+    script = venv_script("fourierf-render")
+    if not script.exists():
+        pytest.skip(f"{script} is not installed (pip install -e .)")
+    proc = subprocess.run(
+        [str(script), "orbit", "--load-config", str(tmp_path / "missing.json")],
+        capture_output=True,
+        text=True,
+        cwd=REPO_ROOT,
+        timeout=120,
+    )
+    assert proc.returncode == EXIT_USER_ERROR
+    assert "config file not found" in proc.stderr and "Traceback" not in proc.stderr

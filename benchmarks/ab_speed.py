@@ -34,6 +34,36 @@ INSTALLED = {"method_configs": "fourierf_plugin/method_configs", "data/parsers":
 VIEWS = ("27", "76", "97", "99")
 OPTIMISER = ["--optimizer.weight-decay", "0", "--optimizer.lr-decay-ratio", "1.0"]
 FINAL = (600, 800)  # the final phase: after the last upsample (step 560)
+ITERATION_TIMER = """
+import sys, time, torch
+from fourierf_plugin.configs.base import load_config
+from fourierf_plugin.engine.checkpoint import load_latest_checkpoint
+from fourierf_plugin.engine.optimizers import build_optimizer
+from fourierf_plugin.engine.trainer import TrainerConfig
+try:  # this project after its redesign
+    from fourierf_plugin.accel.allocator import keep_freed_memory
+    from fourierf_plugin.engine.machine import seed_everything
+    from fourierf_plugin.method_configs import config_registry
+    registry = (config_registry(),)
+except ImportError:  # before it
+    from fourierf_plugin.engine.trainer import seed_everything
+    from fourierf_plugin.utils.allocator import keep_freed_memory
+    registry = ()
+keep_freed_memory()
+run_dir, step, warmup, iters = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
+config = load_config(run_dir + "/config.json", TrainerConfig, *registry)
+pipeline = config.pipeline.setup(device=torch.device("cpu"), max_iters=800, generator=seed_everything(config.seed))
+pipeline.load_state_dict(load_latest_checkpoint(run_dir + "/checkpoints")[1]["pipeline"])
+optimizer = build_optimizer(config.optimizer, pipeline.model.param_groups())
+for i in range(warmup + iters):
+    if i == warmup:
+        start = time.perf_counter()
+    loss, _ = pipeline.train_step(step)
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    optimizer.step()
+print((time.perf_counter() - start) / iters)
+"""
 
 
 def export_tree(rev: str | None, where: Path) -> Path:
@@ -95,6 +125,14 @@ def run_side(code: Path, label: str, seed: int, work: Path, shared: Path) -> dic
     }
 
 
+def time_iterations(code: Path, run_dir: Path, step: int = 700, warmup: int = 5, iters: int = 40) -> float:
+    """Seconds per training iteration at ``step`` on a run's final saved state, in a fresh process of ``code``."""
+    env = dict(os.environ, PYTHONPATH=str(code))
+    cmd = [sys.executable, "-P", "-c", ITERATION_TIMER, str(run_dir), str(step), str(warmup), str(iters)]
+    out = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout
+    return float(out.split()[-1])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--old", default="HEAD", help="git revision of the baseline")
@@ -103,6 +141,7 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[20211202, 1, 2])
     ap.add_argument("--shared", type=Path, default=REPO.parent / "shared")
     ap.add_argument("--work", type=Path, default=REPO / "outputs" / "bench_ab_speed")
+    ap.add_argument("--iteration-repeats", type=int, default=6, help="alternating in-process timings per side")
     args = ap.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
     codes = {"old": export_tree(args.old, args.work / "code-old"), "new": export_tree(args.new, args.work / "code-new")}
@@ -123,6 +162,17 @@ def main() -> None:
     print("| | old | new | new / old |\n|---|---|---|---|")
     for key, name in (("final_s_per_it", "final-phase s/iteration"), ("render_s", "render 25 test views s")):
         print(f"| {name} | {med['old'][key]:.3f} | {med['new'][key]:.3f} | {med['new'][key] / med['old'][key]:.3f} |")
+    # The final phase again, with less noise: 40 iterations at step 700 on each side's own final state (the same
+    # state: equal seeds train identically), in short processes alternating old, new, old, ...
+    first = {side: args.work / "runs" / f"{side}-0" / "lego" / "fourierf-vm" / "run" for side in ("old", "new")}
+    timings: dict[str, list[float]] = {"old": [], "new": []}
+    for i in range(args.iteration_repeats):
+        for side in ("old", "new") if i % 2 == 0 else ("new", "old"):
+            timings[side].append(time_iterations(codes[side], first[side]))
+    (args.work / "iterations.json").write_text(json.dumps(timings))
+    old_it, new_it = statistics.median(timings["old"]), statistics.median(timings["new"])
+    print(f"| s/iteration at step 700, in-process ({args.iteration_repeats} alternating repeats of 40) | "
+          f"{old_it:.4f} | {new_it:.4f} | {new_it / old_it:.3f} |")
     for side in ("old", "new"):
         psnrs = [f"{r['psnr']:.4f} (seed {r['seed']})" for r in rows if r["side"] == side]
         print(f"test PSNR {side}: " + ", ".join(psnrs))

@@ -10,8 +10,9 @@ from __future__ import annotations
 import copy
 from pathlib import Path
 
-from fourierf_plugin.configs.base import config_classes, load_config
+from fourierf_plugin.configs.base import config_classes, load_config, to_dict
 from fourierf_plugin.data.scene_effects import EffectsConfig
+from fourierf_plugin.engine.loading import locate_data
 from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.method_configs.registry import all_methods
 from fourierf_plugin.method_configs.scene_presets import apply_real_scene_preset
@@ -28,8 +29,17 @@ def finalize(config: TrainerConfig) -> tuple[TrainerConfig, list[str]]:
     """A copy of ``config`` with ``--data`` in its parser, the scene preset applied and the scene's effects resolved;
     and the notes that say what was decided and why (for the caller to print)."""
     config = copy.deepcopy(config)
+    parser = config.pipeline.datamanager.dataparser
+    if config.data is not None and str(parser.data) != "." and Path(parser.data) != Path(config.data):
+        fail(
+            f"two scene folders given: --data {config.data} and, after the parser subcommand, --data {parser.data}",
+            "pass --data once",
+        )
     if config.data is not None:
-        config.pipeline.datamanager.dataparser.data = config.data
+        parser.data = config.data
+    parser.data = Path(parser.data).expanduser().resolve()  # config.json must work from any working directory
+    config.data = parser.data
+    config.output_dir = Path(config.output_dir).expanduser().resolve()
     declared = config.pipeline.datamanager.dataparser.setup().declaration()
     notes = []
     preset = config.scene_preset
@@ -48,9 +58,11 @@ def finalize(config: TrainerConfig) -> tuple[TrainerConfig, list[str]]:
     return config, notes
 
 
-def resume_config(method_name: str, load_dir: Path) -> TrainerConfig:
-    """The saved config of the run in ``load_dir``, set to resume there (it must be a ``method_name`` run)."""
+def resume_config(method_name: str, load_dir: Path, data: Path | None = None) -> TrainerConfig:
+    """The saved config of the run in ``load_dir``, set to resume there (it must be a ``method_name`` run), reading
+    its scene from ``data`` if given (a moved scene)."""
     saved = load_config(load_dir, TrainerConfig, config_registry())
+    saved.pipeline.datamanager.dataparser.data = locate_data(saved, Path(load_dir), data)
     if saved.method_name != method_name:
         fail(
             f"{load_dir} holds a '{saved.method_name}' run, but '{method_name}' was asked to resume it",
@@ -58,3 +70,26 @@ def resume_config(method_name: str, load_dir: Path) -> TrainerConfig:
         )
     saved.load_dir = Path(load_dir)
     return saved
+
+
+def ignored_on_resume(config: TrainerConfig) -> list[str]:
+    """The flags of a resume command that the saved run would silently ignore: everything that differs from the
+    method's preset, except ``--load-dir`` and ``--data`` (a resumed run keeps its own config)."""
+    preset = all_methods.get(config.method_name)
+    if preset is None:
+        return []
+    given, default = _flat(to_dict(config)), _flat(to_dict(preset))
+    keep = {"load_dir", "data"}
+    return sorted(f"--{k.replace('_', '-')}" for k, v in given.items() if k not in keep and default.get(k) != v)
+
+
+def _flat(tree: object, prefix: str = "") -> dict[str, object]:
+    if not isinstance(tree, dict):
+        return {prefix: tree}
+    out: dict[str, object] = {}
+    for key, value in tree.items():
+        if key == "_type" and prefix:
+            out[f"{prefix}._type"] = value
+        elif key != "_type":
+            out |= _flat(value, f"{prefix}.{key}" if prefix else key)
+    return out

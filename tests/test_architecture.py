@@ -30,6 +30,7 @@ LAYERS: dict[str, int] = {
     f"{PACKAGE}.data.scene_effects": 1,
     f"{PACKAGE}.data.dataparser_base": 2,
     f"{PACKAGE}.data.images": 1,
+    f"{PACKAGE}.data.poses": 1,
     f"{PACKAGE}.data.view_selection": 1,
     f"{PACKAGE}.synthetic": 1,
     # the field, and the fast forms of its operations

@@ -19,6 +19,7 @@ from fourierf_plugin.data.dataparser_base import (
     Split,
 )
 from fourierf_plugin.data.images import load_images
+from fourierf_plugin.data.poses import rotation_problem
 from fourierf_plugin.data.scene_effects import SceneDeclaration
 from fourierf_plugin.data.view_selection import explicit_views, kmeans_views
 from fourierf_plugin.utils.errors import fail
@@ -96,6 +97,9 @@ def _read_transforms(path: Path) -> _Transforms:
             fail(f"{where}: transform_matrix must be a 4x4 list of numbers, got {frame['transform_matrix']!r:.80}", fix)
         if not np.isfinite(matrix).all():
             fail(f"{where}: transform_matrix has non-finite values", fix)
+        problem = rotation_problem(matrix)
+        if problem is not None:
+            fail(f"{where}: transform_matrix is not a camera pose: {problem}", f"fix or remove that frame; {fix}")
         file_paths.append(frame["file_path"])
         matrices[i] = matrix
     return _Transforms(path, float(angle), file_paths, matrices)

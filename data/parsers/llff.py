@@ -24,6 +24,7 @@ from fourierf_plugin.data.dataparser_base import (
     Split,
 )
 from fourierf_plugin.data.images import load_images
+from fourierf_plugin.data.poses import rotation_problem
 from fourierf_plugin.data.scene_effects import SceneDeclaration
 from fourierf_plugin.data.view_selection import explicit_views, regnerf_views
 from fourierf_plugin.utils.errors import fail
@@ -67,6 +68,10 @@ def load_poses_bounds(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         rows = sorted({int(r) for r in np.argwhere(~np.isfinite(arr))[:, 0]})
         fail(f"{path} has NaN or infinite values in row(s) {rows[:10]}", "re-run pose estimation; the file is corrupt")
     poses = arr[:, :15].reshape(-1, 3, 5).astype(np.float64)
+    for row, pose in enumerate(poses):
+        problem = rotation_problem(pose[:, :4])
+        if problem is not None:
+            fail(f"{path}, row {row} (camera {row}): not a camera pose: {problem}", "re-run pose estimation")
     bounds = arr[:, 15:].astype(np.float64)
     if (bounds <= 0).any() or (bounds[:, 0] >= bounds[:, 1]).any():
         fail(f"{path} has depth bounds that are not 0 < near < far", "re-run pose estimation; the bounds are corrupt")

@@ -6,6 +6,7 @@ each view as it is scored).
 
 from __future__ import annotations
 
+import shutil
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -32,13 +33,17 @@ def evaluate(
 ) -> dict:
     """Render and score every view of ``split``; the renders go to ``render_dir`` as PNGs (None: not written).
 
-    Returns the report ``fourierf-eval`` writes: per-image and mean metrics, the checkpoint, timings.
+    The PNGs are written into ``<render_dir>.partial`` and the folder is renamed when every view is done, so a
+    ``render_dir`` always holds a complete set. Returns the report ``fourierf-eval`` writes: per-image and mean
+    metrics, the checkpoint, timings.
     """
     per_image = []
     stems: set[str] = set()  # names from the dataset, made safe and distinct as file names
     started = time.perf_counter()
-    if render_dir is not None:
-        render_dir.mkdir(parents=True, exist_ok=True)
+    partial = None if render_dir is None else render_dir.with_name(render_dir.name + ".partial")
+    if partial is not None:
+        shutil.rmtree(partial, ignore_errors=True)  # what an interrupted evaluation left
+        partial.mkdir(parents=True)
     for index, r in enumerate(run.pipeline.render_views(split, run.step)):
         item = {
             "name": r.view.name,
@@ -50,13 +55,17 @@ def evaluate(
         if lpips is not None:
             item["lpips"] = lpips.distance(r.rgb.to(run.device), r.target.to(run.device))
         per_image.append(item)
-        if render_dir is not None:
-            iio.imwrite(render_dir / f"{unique_safe_name(r.view.name, index, stems)}.png", to_uint8(r.rgb))
+        if partial is not None:
+            iio.imwrite(partial / f"{unique_safe_name(r.view.name, index, stems)}.png", to_uint8(r.rgb))
         if on_view is not None:
             on_view(item)
     if not per_image:
         data = run.config.pipeline.datamanager.dataparser.data
         fail(f"the {split} split of {data} has no views", "evaluate another split")
+    if render_dir is not None and partial is not None:
+        if render_dir.exists():  # an earlier evaluation of the same step and split: the same renders
+            shutil.rmtree(render_dir)
+        partial.rename(render_dir)
     results: dict[str, float | None] = {}
     for key in METRICS:
         values = [p[key] for p in per_image if key in p]

@@ -29,6 +29,19 @@ def run_dir_of(config_path: Path) -> Path:
     return config_path.parent if config_path.suffix == ".json" else config_path
 
 
+def locate_data(config: TrainerConfig, run_dir: Path, override: Path | None = None) -> Path:
+    """The scene folder of a saved run: ``override`` if given, else the recorded (absolute) folder, else the one at
+    the recorded place relative to the run folder (the run was moved together with its data)."""
+    if override is not None:
+        return Path(override).expanduser().resolve()
+    recorded = Path(config.pipeline.datamanager.dataparser.data)
+    if not recorded.exists() and config.data_from_run_dir is not None:
+        beside = (Path(run_dir) / config.data_from_run_dir).resolve()
+        if beside.exists():
+            return beside
+    return recorded
+
+
 def load_run(
     config_path: Path,
     registry: Registry,
@@ -43,8 +56,7 @@ def load_run(
     """
     config = load_config(config_path, TrainerConfig, registry)
     run_dir = run_dir_of(config_path)
-    if data is not None:
-        config.pipeline.datamanager.dataparser.data = data
+    config.pipeline.datamanager.dataparser.data = locate_data(config, run_dir, data)
     if checkpoint is not None:
         ckpt_path, state = checkpoint, load_checkpoint(checkpoint)
     else:

@@ -15,6 +15,7 @@ from typing import Any
 
 from fourierf_plugin.field_components.schedules import steps_from_fractions
 from fourierf_plugin.utils.errors import fail
+from fourierf_plugin.utils.memory import available_memory, check_fits
 
 
 def _number(value: Any) -> bool:
@@ -143,3 +144,35 @@ def check_training_options(config: Any) -> None:
                 "use fractions strictly between 0 and 1 and a --max-num-iterations long enough to place them"
                 f"{needed}, or pass {flag} with no value to disable them",
             )
+    check_grid_fits(config)
+
+
+TRAINING_COPIES = 6
+"""Float32 copies of every grid value in training: the parameter, its gradient, AdamW's two moments, the filtered
+copy and its gradient."""
+
+
+def grid_values(field: Any, n_voxels: float) -> float:
+    """Grid values of a field config at ``n_voxels`` (a cubic box: planes of side², lines of side)."""
+    side = n_voxels ** (1.0 / 3.0)
+    components = sum(field.density_components) + sum(field.appearance_components)
+    if field.decomposition == "cp":
+        return (field.density_components[0] + field.appearance_components[0]) * 3 * side
+    return components * (side * side + side)
+
+
+def check_grid_fits(config: Any, available: int | None = None) -> None:
+    """A UserError, before anything is built, when the final grid cannot fit in the memory available now."""
+    field = config.pipeline.model.field
+    needed = grid_values(field, field.n_voxels_final) * 4 * TRAINING_COPIES
+    free = available_memory() if available is None else available
+    if free is None or needed <= free:
+        return
+    side = (free / 2 / (4 * TRAINING_COPIES * grid_values(field, 1.0) / 2)) ** 0.5  # room for the rest of the run
+    flag = flag_of(f"{_MODEL}.field.n_voxels_final")
+    check_fits(
+        needed,
+        f"the final grid ({flag} {field.n_voxels_final})",
+        f"pass at most {flag} {int(side) ** 3} on this machine (300^3 = 27000000 is the paper's)",
+        free,
+    )

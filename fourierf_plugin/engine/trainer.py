@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import ClassVar, Literal
 
 import torch
+import tyro
 from rich.markup import escape
 
 from fourierf_plugin import __version__
@@ -46,28 +47,45 @@ def drop_records_after(path: Path, step: int) -> None:
     os.replace(tmp, path)
 
 
-class _DeferredInterrupt:
-    """First Ctrl-C asks the loop to stop at the end of the current step (and save); a second one aborts."""
+STOP_SIGNALS = tuple(
+    getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name)
+)
+"""Ctrl-C, and what a job scheduler, ``timeout``, a closed SSH session or a container stop sends."""
+
+
+class _DeferredStop:
+    """The first stop signal asks the loop to stop at the end of the current step (and save); a second one aborts."""
 
     def __init__(self) -> None:
-        self.requested = False
-        self._previous = None
+        self.signal: int | None = None
+        self._previous: dict[int, object] = {}
 
-    def __enter__(self) -> _DeferredInterrupt:
+    @property
+    def requested(self) -> bool:
+        return self.signal is not None
+
+    @property
+    def exit_code(self) -> int:
+        """The shell's convention for a process ended by the signal: 128 + its number (Ctrl-C: 130)."""
+        return 128 + int(self.signal or signal.SIGINT)
+
+    def __enter__(self) -> _DeferredStop:
         try:
-            self._previous = signal.signal(signal.SIGINT, self._handle)
+            for signum in STOP_SIGNALS:
+                self._previous[signum] = signal.signal(signum, self._handle)
         except ValueError:  # not the main thread: leave signals alone
-            self._previous = None
+            self.__exit__()
         return self
 
     def _handle(self, signum, frame) -> None:
         if self.requested:
             raise KeyboardInterrupt
-        self.requested = True
+        self.signal = signum
 
     def __exit__(self, *exc) -> None:
-        if self._previous is not None:
-            signal.signal(signal.SIGINT, self._previous)
+        for signum, previous in self._previous.items():
+            signal.signal(signum, previous)  # type: ignore[arg-type]
+        self._previous = {}
 
 
 class Trainer:
@@ -104,6 +122,9 @@ class Trainer:
         if self.resume_state is None:
             scene = self.pipeline.datamanager.reference_outputs
             self.run_dir = make_run_dir(c.output_dir, scene.scene_name, c.method_name, c.timestamp)
+            data, run = Path(c.pipeline.datamanager.dataparser.data).resolve(), self.run_dir.resolve()
+            if os.path.commonpath([data, run]) != data.anchor:  # beside each other, not only on the same disk
+                c.data_from_run_dir = Path(os.path.relpath(data, run))
         else:
             assert c.load_dir is not None
             self.run_dir = Path(c.load_dir)
@@ -129,7 +150,8 @@ class Trainer:
         self.console.print(f"training views ({len(scene.view_ids)}): {escape(', '.join(scene.image_names))}")
         self.console.print(f"scene effects: {model.effects.describe()}; {self.config.scene_preset} preset")
         self.console.print(
-            f"device {self.device}, grid {model.field.resolution}, {self.config.max_num_iterations} iterations, "
+            f"device {self.device} ({torch.get_num_threads()} CPU threads), grid {model.field.resolution}, "
+            f"{self.config.max_num_iterations} iterations, "
             f"occupancy updates after {model.occupancy_steps}, upsamples after {model.upsample_steps}"
         )
         if self.start_step:
@@ -184,7 +206,7 @@ class Trainer:
         # With --profile-phases the loop body is timed phase by phase (logging and saving excluded).
         timer = PhaseTimer() if c.profile_phases else None
         phase_totals: Counter[str] = Counter()  # update() adds the seconds of each log interval
-        with _DeferredInterrupt() as interrupt, TaskProgress(c.max_num_iterations, self.start_step) as progress:
+        with _DeferredStop() as interrupt, TaskProgress(c.max_num_iterations, self.start_step) as progress:
             for step in range(self.start_step, c.max_num_iterations):
                 with timer or contextlib.nullcontext(), phase("other"):
                     lr_scale = set_learning_rates(optimizer, c.optimizer, step, reset_steps, c.max_num_iterations)
@@ -217,9 +239,10 @@ class Trainer:
         elapsed = time.perf_counter() - started
         if done < c.max_num_iterations:
             path = self.save(done, optimizer)
-            self.console.print(f"interrupted at step {done}: saved {path}")
+            name = signal.Signals(interrupt.exit_code - 128).name
+            self.console.print(f"stopped by {name} at step {done}: saved {path}")
             self.console.print(f"resume with: fourierf-train {c.method_name} --load-dir {self.run_dir}")
-            raise SystemExit(130)
+            raise SystemExit(interrupt.exit_code)
         done_record = {"event": "done", "step": done, "train_seconds": elapsed}
         if timer is not None:
             phase_totals.update(timer.take())
@@ -243,6 +266,9 @@ class TrainerConfig(InstantiateConfig):
     optimizer: OptimizerConfig = field(default_factory=OptimizerConfig)
     data: Path | None = None
     """Scene folder (copied into the dataparser's data path)."""
+    data_from_run_dir: tyro.conf.Suppress[Path | None] = None
+    """The scene folder relative to the run folder (set by the trainer), so a run moved together with its data
+    still finds it."""
     output_dir: Path = Path("outputs")
     """Runs go to OUTPUT_DIR/<scene>/<method>/<timestamp>/."""
     max_num_iterations: int = 10000

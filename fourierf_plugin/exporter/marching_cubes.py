@@ -34,6 +34,7 @@ from skimage.measure import marching_cubes
 from torch import Tensor
 
 from fourierf_plugin.utils.errors import UserError, fail
+from fourierf_plugin.utils.memory import check_fits
 
 LevelKind = Literal["density", "opacity"]
 Level = Literal["auto"] | float
@@ -44,6 +45,8 @@ MAX_RESOLUTION = 1024
 AUTO_OPACITY = 0.5
 """The opacity ``--level auto`` extracts (see the module docstring)."""
 DEFAULT_CHUNK = 2**18
+BYTES_PER_VERTEX = 12
+"""An estimate of the export's memory per grid vertex: the float32 volume and marching cubes' own arrays."""
 NDC_NOTE = (
     "mesh is in NDC space: x, y in [-1, 1] are screen coordinates of the reference camera, z = -1 is the near "
     "plane and z = 1 is infinity (not metric world units)"
@@ -350,6 +353,11 @@ def export_field_mesh(
         fail(f"--min-component-faces {min_component_faces} is negative", "pass 0 to keep every piece")
     if keep_largest is not None and keep_largest < 1:
         fail(f"--keep-largest {keep_largest} must be at least 1", "omit it to keep every piece")
+    check_fits(
+        BYTES_PER_VERTEX * math.prod(reso),
+        f"a {reso[0]}x{reso[1]}x{reso[2]} marching-cubes grid (--resolution)",
+        "pass a smaller --resolution (e.g. 256)",
+    )
     aabb = model.aabb.detach().cpu().double().numpy()
     lo, hi = check_bbox(*(bbox if bbox is not None else (aabb[0], aabb[1])))
     device = model.aabb.device

@@ -14,6 +14,7 @@ from fourierf_plugin.engine.evaluation import evaluate
 from fourierf_plugin.scripts.cli import run_cli, strip_verbose
 from fourierf_plugin.scripts.run_options import RunOptions
 from fourierf_plugin.utils.console import get_console, warn, write_json
+from fourierf_plugin.utils.files import check_writable_dir
 from fourierf_plugin.utils.lpips import LPIPS, default_lpips_weights
 
 
@@ -39,6 +40,9 @@ def print_view(item: dict) -> None:
 
 def run_eval(cfg: EvalConfig) -> dict:
     console = get_console()
+    check_writable_dir(cfg.output_path.parent, "--output-path")
+    if cfg.render_dir is not None and str(cfg.render_dir).lower() != "none":
+        check_writable_dir(cfg.render_dir.parent, "--render-dir")
     run = cfg.load_run()
     weights = cfg.lpips_weights or default_lpips_weights()
     lpips = LPIPS(weights).to(run.device) if weights is not None else None

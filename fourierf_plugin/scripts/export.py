@@ -29,6 +29,7 @@ from fourierf_plugin.scripts.cli import run_cli, strip_verbose
 from fourierf_plugin.scripts.run_options import RunOptions
 from fourierf_plugin.utils.console import get_console
 from fourierf_plugin.utils.errors import fail
+from fourierf_plugin.utils.files import check_writable_dir
 
 
 @dataclass
@@ -65,6 +66,7 @@ Commands = tyro.extras.subcommand_type_from_defaults({"marching-cubes": Marching
 def check_options(cfg: MarchingCubesConfig) -> None:
     """Everything that can be checked without the model, before the (slow) load and sampling."""
     check_suffix(cfg.output_path)
+    check_writable_dir(cfg.output_path.parent, "--output-path")
     check_resolution(cfg.resolution)
     check_frequency_cap(cfg.frequency_cap)
     check_level(cfg.level, cfg.level_kind)

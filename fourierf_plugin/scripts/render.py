@@ -30,6 +30,7 @@ from fourierf_plugin.scripts.run_options import RunOptions
 from fourierf_plugin.utils.colormaps import Colormap, colorize_accumulation, colorize_depth, depth_range, to_uint8
 from fourierf_plugin.utils.console import TaskProgress, format_duration, get_console, warn
 from fourierf_plugin.utils.errors import UserError, fail
+from fourierf_plugin.utils.memory import available_memory, check_fits
 
 OUTPUT_NAMES = ("rgb", "depth", "accumulation")
 
@@ -224,6 +225,24 @@ def build_cameras(cfg: RenderConfig, run: LoadedRun) -> tuple[Cameras, list[str]
     return cameras, [f"frame_{i:05d}" for i in range(len(cameras))]
 
 
+BYTES_PER_PIXEL = 100
+"""An estimate of a frame's memory per pixel: its rays, the rendered outputs, their concatenation and the images."""
+
+
+def check_frame_fits(width: int, height: int, scale: float, available: int | None = None) -> None:
+    """A UserError before rendering when one frame of this size cannot fit in the memory available now."""
+    free = available_memory() if available is None else available
+    if free is None:
+        return
+    largest = scale * (free / (BYTES_PER_PIXEL * width * height)) ** 0.5
+    check_fits(
+        BYTES_PER_PIXEL * width * height,
+        f"a {width}x{height} frame (--resolution-scale {scale:g})",
+        f"use at most --resolution-scale {largest:.2g} on this machine",
+        free,
+    )
+
+
 # -- writing ------------------------------------------------------------------------------------------------------
 def _mkdir(path: Path) -> None:
     try:
@@ -294,6 +313,7 @@ def render(cfg: RenderConfig) -> RenderResult:
     run = cfg.load_run()
     cameras, stems = build_cameras(cfg, run)
     cameras = scale_cameras(cameras, cfg.resolution_scale)
+    check_frame_fits(cameras.width, cameras.height, cfg.resolution_scale)
     output_dir = cfg.output_dir or run.run_dir / "renders" / f"{cfg.mode}-step{run.step:06d}"
     for name in outputs:
         _mkdir(output_dir / name)

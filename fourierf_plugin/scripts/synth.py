@@ -18,6 +18,7 @@ from fourierf_plugin.scripts.cli import run_cli, strip_verbose
 from fourierf_plugin.synthetic import default_scene, load_scene, write_blender_dataset
 from fourierf_plugin.utils.console import get_console
 from fourierf_plugin.utils.errors import fail
+from fourierf_plugin.utils.files import check_writable_dir
 
 
 @dataclass
@@ -58,6 +59,7 @@ def _check_output_dir(cfg: SynthConfig) -> None:
         fail(f"--output-dir {out} is a file", "pass a folder path (it is created if missing)")
     if out.is_dir() and any(out.iterdir()) and not cfg.overwrite:
         fail(f"--output-dir {out} already exists and is not empty", "pass --overwrite, or choose a new folder")
+    check_writable_dir(out.parent, "--output-dir")
 
 
 def synthesize(cfg: SynthConfig) -> Path:

@@ -10,6 +10,7 @@ import tyro
 from fourierf_plugin.engine.option_checks import check_training_options
 from fourierf_plugin.engine.trainer import Trainer, TrainerConfig
 from fourierf_plugin.method_configs import AnnotatedMethodUnion, finalize, resume_config
+from fourierf_plugin.method_configs.finalize import ignored_on_resume
 from fourierf_plugin.scripts.cli import run_cli, strip_verbose
 from fourierf_plugin.utils.console import get_console
 from fourierf_plugin.utils.errors import fail
@@ -23,7 +24,14 @@ def parse_args(args: list[str]) -> TrainerConfig:
 def build_config(config: TrainerConfig) -> tuple[TrainerConfig, list[str]]:
     """The finished config of a new run (``finalize``) or the saved one of a run to resume, and the notes to print."""
     if config.load_dir is not None:
-        return resume_config(config.method_name, config.load_dir), []
+        ignored = ignored_on_resume(config)
+        if ignored:
+            fail(
+                f"{' '.join(ignored)} would be ignored: a resumed run continues with its own saved config "
+                "(every schedule is a fraction of its length)",
+                f"resume with only --load-dir {config.load_dir} (and --data if its scene moved), or start a new run",
+            )
+        return resume_config(config.method_name, config.load_dir, config.data), []
     if config.data is None and str(config.pipeline.datamanager.dataparser.data) == ".":
         fail("no scene given", "pass --data PATH_TO_SCENE (e.g. --data demo/lego_tiny), or --load-dir RUN to resume")
     check_training_options(config)  # before any file of the scene is read

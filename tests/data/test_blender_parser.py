@@ -192,6 +192,21 @@ BAD_INPUTS: dict[str, tuple[Callable[[Path], None], dict[str, Any], str]] = {
         {},
         "non-finite",
     ),
+    "all-zero matrix": (
+        _edit_json("train", lambda m: m["frames"][2].update(transform_matrix=[[0.0] * 4] * 4)),
+        {},
+        "frame 2: transform_matrix is not a camera pose: its rotation is singular",
+    ),
+    "scaled rotation": (
+        _edit_json("train", lambda m: m["frames"][3].update(transform_matrix=(2 * np.eye(4)).tolist())),
+        {},
+        "frame 3: transform_matrix is not a camera pose: its rotation is not orthonormal",
+    ),
+    "mirrored rotation": (
+        _edit_json("train", lambda m: m["frames"][0].update(transform_matrix=np.diag([-1.0, 1, 1, 1]).tolist())),
+        {},
+        "frame 0: transform_matrix is not a camera pose: its rotation mirrors",
+    ),
     "missing image": (lambda r: (r / "train" / "r_2.png").unlink(), {}, "r_2.png"),
     "mixed sizes": (_mixed_sizes, {}, "r_3.png"),
     "num_views > split": (lambda r: None, {"num_views": 6}, "transforms_train.json"),

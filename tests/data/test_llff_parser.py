@@ -301,6 +301,20 @@ def test_nan_in_poses(scene: Path) -> None:
     assert "poses_bounds.npy" in err.problem and "NaN" in err.problem and "[4]" in err.problem
 
 
+@pytest.mark.parametrize(
+    ("rotation", "expected"),
+    [(np.zeros((3, 3)), "singular"), (3.0 * np.eye(3), "not orthonormal"), (np.diag([1.0, 1.0, -1.0]), "mirrors")],
+)
+def test_degenerate_poses_are_refused_naming_the_camera(scene: Path, rotation: np.ndarray, expected: str) -> None:
+    arr = np.load(scene / "poses_bounds.npy")
+    pose = arr[6, :15].reshape(3, 5)
+    pose[:, :3] = rotation
+    arr[6, :15] = pose.reshape(-1)
+    np.save(scene / "poses_bounds.npy", arr)
+    err = _user_error(scene)
+    assert "poses_bounds.npy, row 6 (camera 6): not a camera pose" in err.problem and expected in err.problem
+
+
 def test_num_views_larger_than_the_training_split(scene: Path) -> None:
     err = _user_error(scene, num_views=18)
     assert "--num-views 18" in err.problem and "17" in err.problem and "17" in (err.fix or "")

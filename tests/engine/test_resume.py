@@ -129,8 +129,13 @@ def _wait_for(predicate, timeout: float, proc: subprocess.Popen) -> bool:
     return False
 
 
-@pytest.mark.skipif(os.name == "nt", reason="SIGINT to a child process is POSIX-only")
-def test_ctrl_c_saves_a_checkpoint_and_exits_130(tmp_path: Path) -> None:
+@pytest.mark.skipif(os.name == "nt", reason="signals to a child process are POSIX-only")
+@pytest.mark.parametrize(("signum", "exit_code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143), (signal.SIGHUP, 129)])
+def test_a_stop_signal_saves_a_checkpoint_and_exits_128_plus_its_number(
+    tmp_path: Path, signum: signal.Signals, exit_code: int
+) -> None:
+    """Ctrl-C, and SIGTERM/SIGHUP (a scheduler, ``timeout``, a closed SSH session, a container stop) finish the step,
+    save a checkpoint, print how to resume and exit with the shell's code for the signal."""
     script = venv_script("fourierf-train")
     if not script.exists():
         pytest.skip(f"{script} is not installed (pip install -e . first)")
@@ -144,16 +149,16 @@ def test_ctrl_c_saves_a_checkpoint_and_exits_130(tmp_path: Path) -> None:
         try:
             started = _wait_for(lambda: any(out.glob("*/*/*/metrics.jsonl")), 120, proc)
             assert started, f"training never started:\n{stdout_path.read_text()}\n{stderr_path.read_text()}"
-            proc.send_signal(signal.SIGINT)
+            proc.send_signal(signum)
             code = proc.wait(timeout=60)
         finally:
             if proc.poll() is None:
                 proc.kill()
                 proc.wait()
     text, err = stdout_path.read_text(), stderr_path.read_text()
-    assert code == 130, f"exit code {code}\n{text}\n{err}"
+    assert code == exit_code, f"exit code {code}\n{text}\n{err}"
     assert "Traceback" not in err
-    assert "resume with" in text and "--load-dir" in text
+    assert f"stopped by {signum.name}" in text and "resume with" in text and "--load-dir" in text
 
     (run_dir,) = list(out.glob("*/*/*/"))
     _, state = load_latest_checkpoint(run_dir / "checkpoints")

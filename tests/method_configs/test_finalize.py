@@ -56,9 +56,12 @@ def raw(data: Path, *flags: str, method: str = "fourierf-vm") -> TrainerConfig:
 
 
 def without_decisions(config: TrainerConfig) -> dict:
-    """The config as data, less what ``finalize`` decides (parser data, preset name, effects)."""
+    """The config as data, less what ``finalize`` decides (scene and output folders made absolute, preset name,
+    effects)."""
     data = to_dict(config)
     data["pipeline"]["datamanager"]["dataparser"].pop("data")
+    data.pop("data")
+    data.pop("output_dir")
     data["pipeline"].pop("effects")
     data.pop("scene_preset")
     return data

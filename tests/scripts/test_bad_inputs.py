@@ -124,6 +124,22 @@ def no_frames(meta: dict) -> None:
     meta["frames"] = []
 
 
+def zero_pose(meta: dict) -> None:
+    meta["frames"][1]["transform_matrix"] = [[0.0] * 4] * 4
+
+
+def foreign_checkpoint(config: Path, tmp: Path) -> Path:
+    """A good checkpoint of the run, copied out of its checkpoints folder (as another run's would be)."""
+    newest = sorted((config.parent / "checkpoints").glob("step-*.ckpt"))[-1]
+    return Path(shutil.copy(newest, tmp / "foreign.ckpt"))
+
+
+def plain_file(tmp: Path, _: Path) -> list[str]:
+    """Puts a plain file where a case's output folder should be; adds no arguments."""
+    write(tmp / "file.txt", "not a folder")
+    return []
+
+
 def moved_scene(payload: dict, where: Path) -> None:
     payload["config"]["pipeline"]["datamanager"]["dataparser"]["data"] = str(where)
 
@@ -306,13 +322,18 @@ CASES: dict[str, Case] = {
     ),
     "eval: truncated checkpoint": Case(
         "eval",
-        on_run(EVAL, extra=lambda tmp, cfg: ["--checkpoint", str(truncated_checkpoint(cfg, tmp))]),
+        on_run(
+            EVAL, extra=lambda tmp, cfg: ["--checkpoint", str(truncated_checkpoint(cfg, tmp)), "--force-checkpoint"]
+        ),
         ("cut.ckpt", "unreadable", "truncated"),
     ),
     "eval: every checkpoint truncated": Case("eval", on_run(EVAL, truncate_all_checkpoints), ("none of the",)),
     "eval: a .npy given as the checkpoint": Case(
         "eval",
-        on_run(EVAL, extra=lambda tmp, _: ["--checkpoint", str(np_saved(tmp / "poses.ckpt", np.zeros(3)))]),
+        on_run(
+            EVAL,
+            extra=lambda tmp, _: ["--checkpoint", str(np_saved(tmp / "poses.ckpt", np.zeros(3))), "--force-checkpoint"],
+        ),
         ("poses.ckpt", "unreadable"),
     ),
     "eval: --data of the wrong dataset kind": Case(
@@ -344,11 +365,56 @@ CASES: dict[str, Case] = {
     ),
     "export: truncated checkpoint": Case(
         "export",
-        on_run(EXPORT, extra=lambda tmp, cfg: ["--checkpoint", str(truncated_checkpoint(cfg, tmp))]),
+        on_run(
+            EXPORT, extra=lambda tmp, cfg: ["--checkpoint", str(truncated_checkpoint(cfg, tmp)), "--force-checkpoint"]
+        ),
         ("cut.ckpt", "unreadable"),
     ),
     "export: malformed config JSON": Case(
         "export", on_run(EXPORT, lambda cfg, tmp: write(copy_run(cfg, tmp), "[1, 2")), ("not valid JSON",)
+    ),
+    # -- a new user's first hour (issue 22) ---------------------------------------------------------------------------
+    "train: an all-zero transform_matrix": Case(
+        "train",
+        lambda tmp, _: train_on(edit_transforms(blender(tmp), "train", zero_pose), tmp),
+        ("transforms_train.json, frame 1", "not a camera pose", "singular", "fix or remove that frame"),
+    ),
+    "train: a final grid larger than the memory": Case(
+        "train",
+        train_with(f"{MODEL}.field.n-voxels-final", "1000000000000"),
+        (f"{MODEL}.field.n-voxels-final 1000000000000", "GiB", "pass at most"),
+    ),
+    "train: --data twice, different folders": Case(
+        "train",
+        lambda tmp, _: train_on(TINY_SCENE, tmp, "blender-data", "--data", str(blender(tmp))),
+        ("two scene folders", "--data once"),
+    ),
+    "train: resume with a flag it would ignore": Case(
+        "train",
+        lambda tmp, cfg: [*resume(intact)(tmp, cfg), "--max-num-iterations", "999"],
+        ("--max-num-iterations would be ignored", "its own saved config", "--load-dir"),
+    ),
+    "eval: another run's checkpoint": Case(
+        "eval",
+        on_run(EVAL, extra=lambda tmp, cfg: ["--checkpoint", str(foreign_checkpoint(cfg, tmp))]),
+        ("foreign.ckpt", "not one of this run's checkpoints", "--force-checkpoint"),
+    ),
+    "eval: an output path that cannot be written": Case(
+        "eval",
+        on_run(["--load-config", "{config}", "--output-path", "{tmp}/file.txt/eval.json"], extra=plain_file),
+        ("cannot write to", "file.txt", "--output-path"),
+    ),
+    "render: a frame larger than the memory": Case(
+        "render",
+        on_run(RENDER, extra=lambda tmp, _: ["--resolution-scale", "3000"]),
+        ("--resolution-scale 3000", "GiB"),
+    ),
+    "export: an output path that cannot be written": Case(
+        "export",
+        on_run(
+            ["marching-cubes", "--load-config", "{config}", "--output-path", "{tmp}/file.txt/m.ply"], extra=plain_file
+        ),
+        ("cannot write to", "file.txt", "--output-path"),
     ),
 }
 

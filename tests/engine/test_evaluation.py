@@ -1,0 +1,45 @@
+"""Evaluating a run (``engine.evaluation``): an interrupted evaluation never leaves a half-filled render folder."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from fourierf_plugin.engine.evaluation import evaluate
+from fourierf_plugin.engine.loading import LoadedRun, load_run
+from fourierf_plugin.method_configs import config_registry
+from tests.helpers import TINY_TEST_VIEWS, train_tiny
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory) -> LoadedRun:
+    _, run_dir = train_tiny(tmp_path_factory.mktemp("run"), iters=6)
+    return load_run(run_dir / "config.json", config_registry())
+
+
+class Stop(Exception):
+    pass
+
+
+def test_an_interrupted_evaluation_leaves_no_render_folder_and_the_next_one_completes(
+    run: LoadedRun, tmp_path: Path
+) -> None:
+    renders = tmp_path / "renders"
+    scored: list[str] = []
+
+    def stop_after_two(item: dict) -> None:
+        scored.append(item["name"])
+        if len(scored) == 2:
+            raise Stop
+
+    with pytest.raises(Stop):
+        evaluate(run, "test", render_dir=renders, on_view=stop_after_two)
+    assert not renders.exists(), "a render folder must only ever hold a complete set"
+    assert len(list(renders.with_name("renders.partial").glob("*.png"))) == 2
+
+    report = evaluate(run, "test", render_dir=renders)
+    assert len(list(renders.glob("*.png"))) == TINY_TEST_VIEWS == report["num_views"]
+    assert not renders.with_name("renders.partial").exists()
+    again = evaluate(run, "test", render_dir=renders)  # an earlier complete set is replaced by the same renders
+    assert sorted(p.stem for p in renders.glob("*.png")) == sorted(item["name"] for item in again["per_image"])

@@ -6,9 +6,8 @@ BIN := $(VENV)/bin
 TORCH_PIN := torch==2.13.0
 DEMO_SCENE := demo/lego_tiny
 DEMO_OUT := outputs
-# Few-shot settings for the bundled 100x100 scene: batch 1024 rays, grid 64^3 -> 128^3, 800 iterations.
-DEMO_FLAGS := --max-num-iterations 800 --pipeline.datamanager.rays-per-batch 1024 \
-	--pipeline.model.field.n-voxels-init 262144 --pipeline.model.field.n-voxels-final 2097152
+# No size flags: the run is sized for the scene and the machine (README, "Run sizes"): on a CPU, for the bundled
+# 100x100 scene, 800 iterations of 1024 rays on a 64^3 -> 128^3 grid.
 
 .PHONY: demo test lint install clean
 
@@ -21,7 +20,7 @@ $(BIN)/.installed: pyproject.toml
 install: $(BIN)/.installed
 
 demo: $(BIN)/.installed
-	$(BIN)/fourierf-train fourierf-vm --data $(DEMO_SCENE) --output-dir $(DEMO_OUT) $(DEMO_FLAGS)
+	$(BIN)/fourierf-train fourierf-vm --data $(DEMO_SCENE) --output-dir $(DEMO_OUT)
 	run=$$(ls -td $(DEMO_OUT)/lego_tiny/fourierf-vm/*/ | head -n 1); \
 	$(BIN)/fourierf-eval --load-config $${run}config.json --output-path $${run}eval.json
 

@@ -13,9 +13,11 @@ from pathlib import Path
 from fourierf_plugin.configs.base import config_classes, load_config, to_dict
 from fourierf_plugin.data.scene_effects import EffectsConfig
 from fourierf_plugin.engine.loading import locate_data
+from fourierf_plugin.engine.machine import pick_device
 from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.method_configs.registry import all_methods
-from fourierf_plugin.method_configs.scene_presets import apply_real_scene_preset
+from fourierf_plugin.method_configs.scene_presets import apply_real_scene_preset, apply_settings
+from fourierf_plugin.method_configs.sizing import run_size
 from fourierf_plugin.utils.errors import fail
 
 
@@ -52,10 +54,24 @@ def finalize(config: TrainerConfig) -> tuple[TrainerConfig, list[str]]:
         if kept:
             notes.append(f"  kept your settings for: {', '.join(kept)}")
     config.scene_preset = preset
+    notes += size_the_run(config, all_methods.get(config.method_name))
     effects = config.pipeline.effects.resolve(declared)
     config.pipeline.effects = EffectsConfig.of(effects)
     notes.append(f"scene effects: {effects.describe()} (the scene declares: {declared.describe()})")
     return config, notes
+
+
+def size_the_run(config: TrainerConfig, pristine: TrainerConfig | None) -> list[str]:
+    """Iterations, batch and grid from the training images and the device (``sizing``), where the user left the
+    preset's values; the note that says so."""
+    train = config.pipeline.datamanager.dataparser.setup().get_outputs("train")
+    views, height, width = train.images.shape[0], train.cameras.height, train.cameras.width
+    size = run_size(views, height, width, pick_device(config.device))
+    applied, kept = apply_settings(config, pristine, size.settings())
+    if not applied:
+        return []
+    note = f"run size for {size.reason}: {', '.join(applied)}"
+    return [note + (f" (kept your {', '.join(kept)})" if kept else "")]
 
 
 def resume_config(method_name: str, load_dir: Path, data: Path | None = None) -> TrainerConfig:

@@ -52,13 +52,18 @@ def real_scene_settings(config: Any) -> dict[str, Any]:
 
 
 def apply_real_scene_preset(config: Any, pristine: Any | None) -> tuple[list[str], list[str]]:
-    """Set the real-scene values where ``config`` still equals ``pristine`` (the unmodified method preset).
+    """Set the real-scene values where ``config`` still equals ``pristine`` (the unmodified method preset)."""
+    return apply_settings(config, pristine, real_scene_settings(config))
+
+
+def apply_settings(config: Any, pristine: Any | None, settings: dict[str, Any]) -> tuple[list[str], list[str]]:
+    """Set each ``settings`` value (config path -> value) where ``config`` still equals ``pristine``.
 
     Returns the settings applied and the ones kept because the user set them. Without a pristine preset (a
     third-party method) every value is applied.
     """
     applied, kept = [], []
-    for path, value in real_scene_settings(config).items():
+    for path, value in settings.items():
         if pristine is not None and _get(config, path) != _get(pristine, path):
             kept.append(path)
             continue

@@ -19,6 +19,7 @@ from rich.markup import escape
 from fourierf_plugin import __version__
 from fourierf_plugin.configs.base import InstantiateConfig, save_config
 from fourierf_plugin.engine.checkpoint import load_latest_checkpoint, save_checkpoint
+from fourierf_plugin.engine.estimates import describe_cost
 from fourierf_plugin.engine.machine import pick_device, seed_everything
 from fourierf_plugin.engine.optimizers import OptimizerConfig, build_optimizer, set_learning_rates
 from fourierf_plugin.engine.option_checks import check_training_options
@@ -154,6 +155,8 @@ class Trainer:
             f"{self.config.max_num_iterations} iterations, "
             f"occupancy updates after {model.occupancy_steps}, upsamples after {model.upsample_steps}"
         )
+        rays = int(self.pipeline.datamanager.active.numel())
+        self.console.print(describe_cost(self.config, rays, torch.get_num_threads(), self.device.type == "cpu"))
         if self.start_step:
             self.console.print(f"resuming at step {self.start_step}")
 

@@ -12,10 +12,13 @@ Iso-level semantics (``level_kind``):
   model's step size, i.e. the quantity composited along rays (TensoRF's alpha with its distance scale). In NDC
   scenes the samples are spaced per ray, so δ (the box step in NDC units) makes this an approximation there.
 
-``level="auto"`` means the half-opaque surface, α = 0.5, in both kinds (for ``density`` the equivalent
-σ = ln 2 / (δ·distance_scale)). Why: a sample with α ≥ 0.5 hides more than half of what lies behind it, which is
-where the rendered depth sits, and the choice does not depend on how much empty space the box holds (a mean of the
-field, as some tools use, does). A field that never reaches the level is reported, not silently re-levelled.
+``level="auto"`` picks the surface that makes the object one solid piece: of the opacities 0.5, 0.3, 0.2, 0.1, 0.05,
+0.02 and 0.01 (in either kind, for ``density`` the equivalent σ), the highest at which the largest connected piece of
+the grid above the level holds at least 95 % of it (``solid_level``; else the level where it holds the most). Why:
+the half-opaque surface (α = 0.5 per ray sample) cuts a few-shot field into hundreds of blobs (the bundled lego:
+the largest piece held 21 % at 0.5, 98 % at 0.2), while a level a little lower gives the object the renders show.
+Pieces smaller than 1 % of the largest are then dropped (``min_component_faces`` None). The report says which level
+was used and why. A field that never reaches an explicit level is reported, not silently re-levelled.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from typing import Any, Literal
 import numpy as np
 import torch
 import trimesh
+from scipy import ndimage
 from skimage.measure import marching_cubes
 from torch import Tensor
 
@@ -42,8 +46,12 @@ Level = Literal["auto"] | float
 SUPPORTED_SUFFIXES = (".ply", ".obj", ".glb")
 MIN_RESOLUTION = 2
 MAX_RESOLUTION = 1024
-AUTO_OPACITY = 0.5
-"""The opacity ``--level auto`` extracts (see the module docstring)."""
+AUTO_OPACITIES = (0.5, 0.3, 0.2, 0.1, 0.05, 0.02, 0.01)
+"""The opacities ``--level auto`` tries, highest first (see the module docstring)."""
+SOLID_SHARE = 0.95
+"""The share of the above-level grid the largest connected piece must hold for a level to count as solid."""
+SMALL_PIECE = 0.01
+"""By default, pieces with fewer faces than this share of the largest piece's are dropped."""
 DEFAULT_CHUNK = 2**18
 BYTES_PER_VERTEX = 12
 """An estimate of the export's memory per grid vertex: the float32 volume and marching cubes' own arrays."""
@@ -67,6 +75,8 @@ class MeshReport:
     removed_components: int
     """Pieces dropped by ``min_component_faces`` / ``keep_largest``."""
     level: float
+    level_reason: str
+    """Why this level: as given, or how ``--level auto`` chose it."""
     level_kind: LevelKind
     field_range: tuple[float, float]
     """Min and max of the sampled field (in ``level_kind`` units)."""
@@ -194,21 +204,51 @@ def opacity_from_density(sigma: Tensor, step_size: float, distance_scale: float)
     return -torch.expm1(-sigma * (step_size * distance_scale))
 
 
-def auto_level(level_kind: LevelKind, step_size: float, distance_scale: float) -> float:
-    """The half-opaque surface α = 0.5, in the units of ``level_kind``."""
+def auto_levels(level_kind: LevelKind, step_size: float, distance_scale: float) -> list[float]:
+    """``AUTO_OPACITIES`` in the units of ``level_kind``."""
     if level_kind == "opacity":
-        return AUTO_OPACITY
-    return -math.log1p(-AUTO_OPACITY) / (step_size * distance_scale)
+        return list(AUTO_OPACITIES)
+    return [-math.log1p(-alpha) / (step_size * distance_scale) for alpha in AUTO_OPACITIES]
 
 
-def check_level_in_range(volume: np.ndarray, level: float, level_kind: str, where: str = "") -> tuple[float, float]:
-    """The field's (min, max); an error when ``level`` is not strictly inside (no surface crosses it)."""
+def largest_piece_share(volume: np.ndarray, level: float) -> float:
+    """The share of the grid points above ``level`` that the largest 26-connected piece of them holds (0: none)."""
+    labels, count = ndimage.label(volume > level, structure=np.ones((3, 3, 3), dtype=bool))
+    if count == 0:
+        return 0.0
+    sizes = np.bincount(labels.ravel())[1:]
+    return float(sizes.max() / sizes.sum())
+
+
+def solid_level(volume: np.ndarray, candidates: Sequence[float]) -> tuple[float, str]:
+    """The highest candidate level at which the object is one solid piece (``SOLID_SHARE``), else the one where the
+    largest piece holds the most; and a sentence that says which and why."""
+    vmin, vmax = float(volume.min()), float(volume.max())
+    tried = [(largest_piece_share(volume, level), level) for level in candidates if vmin < level < vmax]
+    if not tried:
+        fail(
+            f"no automatic level fits: the sampled field ranges over [{vmin:.4g}, {vmax:.4g}]",
+            "pass an explicit --level between those values, or export a later checkpoint",
+        )
+    for share, level in tried:
+        if share >= SOLID_SHARE:
+            return level, f"auto: the highest tried level whose largest piece holds {share:.0%} of the solid"
+    share, level = max(tried)
+    return level, f"auto: no tried level makes one solid piece; the largest holds {share:.0%} at this one"
+
+
+def check_finite(volume: np.ndarray, level_kind: str, where: str = "") -> None:
     finite = np.isfinite(volume)
     if not finite.all():
         fail(
             f"the sampled {level_kind} has {int((~finite).sum())} non-finite values (NaN/inf){where}",
             "the checkpoint has diverged: export an earlier one with --checkpoint",
         )
+
+
+def check_level_in_range(volume: np.ndarray, level: float, level_kind: str, where: str = "") -> tuple[float, float]:
+    """The field's (min, max); an error when ``level`` is not strictly inside (no surface crosses it)."""
+    check_finite(volume, level_kind, where)
     vmin, vmax = float(volume.min()), float(volume.max())
     if not vmin < level < vmax:
         hint = f"e.g. --level {0.5 * (vmin + vmax):.4g}" if vmin < vmax else "the field is constant here"
@@ -251,12 +291,16 @@ def component_labels(mesh: trimesh.Trimesh) -> np.ndarray:
 
 
 def remove_small_components(
-    mesh: trimesh.Trimesh, min_faces: int = 0, keep_largest: int | None = None
+    mesh: trimesh.Trimesh, min_faces: int | None = 0, keep_largest: int | None = None
 ) -> tuple[trimesh.Trimesh, int, int]:
-    """Drop pieces with fewer than ``min_faces`` faces and all but the ``keep_largest`` biggest.
+    """Drop pieces with fewer than ``min_faces`` faces (None: ``SMALL_PIECE`` of the largest piece's) and all but the
+    ``keep_largest`` biggest.
 
     Returns (mesh, pieces kept, pieces removed). Floaters of a few-shot field are exactly such small pieces.
     """
+    if min_faces is None:
+        labels = component_labels(mesh)
+        min_faces = math.ceil(SMALL_PIECE * int(np.bincount(labels).max())) if labels.size else 0
     if min_faces < 0:
         fail(f"--min-component-faces {min_faces} is negative", "pass 0 to keep every piece, or a face count")
     if keep_largest is not None and keep_largest < 1:
@@ -333,7 +377,7 @@ def export_field_mesh(
     level_kind: LevelKind = "opacity",
     colors: bool = False,
     frequency_cap: float | None = None,
-    min_component_faces: int = 0,
+    min_component_faces: int | None = None,
     keep_largest: int | None = None,
     chunk: int = DEFAULT_CHUNK,
 ) -> MeshReport:
@@ -349,7 +393,7 @@ def export_field_mesh(
     reso = check_resolution(resolution)
     cap = check_frequency_cap(frequency_cap)
     check_level(level, level_kind)
-    if min_component_faces < 0:
+    if min_component_faces is not None and min_component_faces < 0:
         fail(f"--min-component-faces {min_component_faces} is negative", "pass 0 to keep every piece")
     if keep_largest is not None and keep_largest < 1:
         fail(f"--keep-largest {keep_largest} must be at least 1", "omit it to keep every piece")
@@ -372,8 +416,12 @@ def export_field_mesh(
 
         volume = sample_grid(field_values, lo, hi, reso, chunk=chunk, device=device)
         sample_seconds = time.perf_counter() - started
-        value = auto_level(level_kind, step_size, distance_scale) if level == "auto" else float(level)
         where = f" at resolution {reso[0]}x{reso[1]}x{reso[2]} in the box {lo.tolist()} - {hi.tolist()}"
+        if level == "auto":
+            check_finite(volume, level_kind, where)
+            value, level_reason = solid_level(volume, auto_levels(level_kind, step_size, distance_scale))
+        else:
+            value, level_reason = float(level), "as given"
         field_range = check_level_in_range(volume, value, level_kind, where)
         mesh = extract_mesh(volume, value, lo, hi)
         mesh, components, removed = remove_small_components(mesh, min_component_faces, keep_largest)
@@ -393,6 +441,7 @@ def export_field_mesh(
         components=components,
         removed_components=removed,
         level=value,
+        level_reason=level_reason,
         level_kind=level_kind,
         field_range=field_range,
         resolution=reso,
@@ -418,7 +467,8 @@ def describe(report: MeshReport) -> list[str]:
         + (f" ({r.removed_components} small ones removed)" if r.removed_components else "")
         + f", watertight: {'yes' if r.watertight else 'no'}",
         f"bounds {vec(r.bounds[0])} - {vec(r.bounds[1])} ({r.space} coordinates)",
-        f"level {r.level_kind} {r.level:.4g} (field range {r.field_range[0]:.4g} .. {r.field_range[1]:.4g}), "
+        f"level {r.level_kind} {r.level:.4g} ({r.level_reason}; field range {r.field_range[0]:.4g} .. "
+        f"{r.field_range[1]:.4g}), "
         f"grid {r.resolution[0]}x{r.resolution[1]}x{r.resolution[2]}, {cutoff}",
         f"took {r.seconds:.2f}s (sampling {r.sample_seconds:.2f}s)",
     ]

@@ -45,13 +45,14 @@ class MarchingCubesConfig(RunOptions):
     bbox_max: tuple[float, float, float] | None = None
     """Upper corner of the sampled box (default: the model's current box)."""
     level: Literal["auto"] | float = "auto"
-    """Iso-level in --level-kind units; auto = the half-opaque surface (opacity 0.5)."""
+    """Iso-level in --level-kind units; auto = the highest opacity in 0.5 ... 0.01 at which the object is one solid
+    piece (the export says which)."""
     level_kind: Literal["opacity", "density"] = "opacity"
     """opacity: alpha 1-exp(-sigma*step*distance_scale) of one ray sample; density: sigma itself."""
     vertex_colors: bool = False
     """Colour the vertices from the appearance field (viewed head-on when colour is view-dependent)."""
-    min_component_faces: int = 0
-    """Drop disconnected pieces with fewer faces (floaters); 0 keeps everything."""
+    min_component_faces: int | None = None
+    """Drop disconnected pieces with fewer faces (floaters); default: 1 % of the largest piece's; 0 keeps all."""
     keep_largest: int | None = None
     """Keep only the k largest pieces."""
     frequency_cap: float | None = None

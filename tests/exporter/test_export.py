@@ -19,15 +19,18 @@ import trimesh
 
 from fourierf_plugin.engine.loading import load_run
 from fourierf_plugin.exporter.marching_cubes import (
-    AUTO_OPACITY,
+    AUTO_OPACITIES,
     NDC_NOTE,
-    auto_level,
+    auto_levels,
+    component_labels,
     describe,
     export_field_mesh,
     extract_mesh,
+    largest_piece_share,
     opacity_from_density,
     remove_small_components,
     sample_grid,
+    solid_level,
     vertex_colors,
     write_mesh,
 )
@@ -106,9 +109,43 @@ def test_opacity_and_auto_level() -> None:
     alpha = opacity_from_density(sigma, 0.01, 25.0)
     np.testing.assert_allclose(alpha.numpy(), -np.expm1(-sigma.double().numpy() * 0.25), rtol=1e-6)
     assert alpha[1] > 0, "small densities are not rounded to zero"
-    assert auto_level("opacity", 0.01, 25.0) == AUTO_OPACITY
-    density_level = auto_level("density", 0.01, 25.0)
-    assert float(opacity_from_density(torch.tensor(density_level), 0.01, 25.0)) == pytest.approx(AUTO_OPACITY)
+    assert auto_levels("opacity", 0.01, 25.0) == list(AUTO_OPACITIES)
+    densities = torch.tensor(auto_levels("density", 0.01, 25.0))
+    np.testing.assert_allclose(opacity_from_density(densities, 0.01, 25.0).numpy(), AUTO_OPACITIES, rtol=1e-6)
+
+
+def blobs_in_a_shell(x: torch.Tensor) -> torch.Tensor:
+    """A solid ball of opacity 0.25 with four dense blobs (0.8) inside it: high levels cut the blobs apart."""
+    ball = (sphere_sdf((0.0, 0.0, 0.0), 0.6)(x) > 0).float() * 0.25
+    blobs = sum((sphere_sdf(c, 0.1)(x) > 0).float() for c in ((0.3, 0, 0), (-0.3, 0, 0), (0, 0.3, 0), (0, -0.3, 0)))
+    return torch.maximum(ball, 0.8 * blobs.clamp(max=1.0))
+
+
+def test_the_automatic_level_is_the_highest_that_makes_one_solid_piece() -> None:
+    volume = sample_grid(blobs_in_a_shell, *CUBE, 41)
+    assert largest_piece_share(volume, 0.5) == pytest.approx(0.25, abs=0.02), "four equal blobs above 0.5"
+    level, reason = solid_level(volume, AUTO_OPACITIES)
+    assert level == 0.2 and "100%" in reason, "0.3 still cuts the blobs apart; 0.2 is the ball"
+    mesh = extract_mesh(volume, level, *CUBE)
+    assert len(np.unique(component_labels(mesh))) == 1
+
+
+def test_without_a_solid_level_the_most_solid_one_is_taken_and_an_unreachable_field_is_an_error() -> None:
+    volume = sample_grid(blobs_in_a_shell, *CUBE, 41)
+    level, reason = solid_level(volume, (0.5,))
+    assert level == 0.5 and "no tried level" in reason and "25%" in reason
+    with pytest.raises(UserError, match="no automatic level fits"):
+        solid_level(np.zeros((4, 4, 4), dtype=np.float32), AUTO_OPACITIES)
+
+
+def test_small_pieces_are_dropped_by_default() -> None:
+    def ball_and_speck(x: torch.Tensor) -> torch.Tensor:
+        return torch.maximum(sphere_sdf((-0.3, 0.0, 0.0), 0.5)(x), sphere_sdf((0.7, 0.0, 0.0), 0.045)(x))
+
+    mesh = extract_mesh(sample_grid(ball_and_speck, *CUBE, 81), 0.0, *CUBE)
+    assert len(np.unique(component_labels(mesh))) == 2
+    cleaned, kept, removed = remove_small_components(mesh, None)
+    assert (kept, removed) == (1, 1) and cleaned.bounds[1, 0] < 0.5, "the speck on the +x side is gone"
 
 
 def test_small_pieces_are_removed() -> None:
@@ -282,7 +319,7 @@ def test_frequency_cap_zero_gives_a_constant_field(tiny: TinyRun) -> None:
     assert full.std() > 0
     assert dc_only.std() < 1e-3 * full.std() + 1e-7, "f = 0 keeps one constant per factor: a flat density"
     prepared = _prepare_as_the_trainer_does(tiny.model, tiny.step)
-    with pytest.raises(UserError, match="empty iso-surface"):
+    with pytest.raises(UserError, match="no automatic level fits"):  # a flat field crosses no level
         export_field_mesh(tiny.model, tiny.step, None, resolution=16, level_kind="density", frequency_cap=0.0)
     _still_trains(tiny.model, prepared)  # a failed export restores the filtering too
 
@@ -310,3 +347,15 @@ def test_ndc_runs_say_which_space_the_mesh_is_in(tiny: TinyRun, monkeypatch) -> 
     )
     assert report.space == "ndc"
     assert NDC_NOTE in describe(report)
+
+
+@pytest.mark.slow
+def test_the_default_export_of_a_trained_demo_run_is_one_dominant_piece(tmp_path: Path) -> None:
+    """``--level auto`` and the default small-piece removal give the object, not a cloud of blobs (issue 22): the
+    bundled lego trained long enough to hold an object (200 iterations on the tiny grid)."""
+    _, run_dir = train_tiny(tmp_path, iters=200, extra=["--pipeline.datamanager.rays-per-batch", "512"])
+    run = load_run(run_dir / "config.json", config_registry(), device="cpu")
+    report = export_field_mesh(run.pipeline.model, run.step, tmp_path / "mesh.ply", resolution=64)
+    assert report.level_reason.startswith("auto: the highest tried level"), describe(report)
+    faces = np.bincount(component_labels(trimesh.load(tmp_path / "mesh.ply")))
+    assert faces.max() >= 0.9 * faces.sum() and faces.sum() > 1000, describe(report)

@@ -74,10 +74,15 @@ def size_the_run(config: TrainerConfig, pristine: TrainerConfig | None) -> list[
     return [note + (f" (kept your {', '.join(kept)})" if kept else "")]
 
 
-def resume_config(method_name: str, load_dir: Path, data: Path | None = None) -> TrainerConfig:
+def resume_config(
+    method_name: str, load_dir: Path, data: Path | None = None, machine: TrainerConfig | None = None
+) -> TrainerConfig:
     """The saved config of the run in ``load_dir``, set to resume there (it must be a ``method_name`` run), reading
-    its scene from ``data`` if given (a moved scene)."""
+    its scene from ``data`` if given (a moved scene), on the threads and device ``machine`` asks for (if given)."""
     saved = load_config(load_dir, TrainerConfig, config_registry())
+    if machine is not None:
+        saved.threads = machine.threads if machine.threads is not None else saved.threads
+        saved.device = machine.device if machine.device != "auto" else saved.device
     saved.pipeline.datamanager.dataparser.data = locate_data(saved, Path(load_dir), data)
     if saved.method_name != method_name:
         fail(
@@ -90,12 +95,13 @@ def resume_config(method_name: str, load_dir: Path, data: Path | None = None) ->
 
 def ignored_on_resume(config: TrainerConfig) -> list[str]:
     """The flags of a resume command that the saved run would silently ignore: everything that differs from the
-    method's preset, except ``--load-dir`` and ``--data`` (a resumed run keeps its own config)."""
+    method's preset, except ``--load-dir``, ``--data``, ``--threads`` and ``--device`` (a resumed run keeps its own
+    config; those four say where it runs, and ``resume_config`` applies them)."""
     preset = all_methods.get(config.method_name)
     if preset is None:
         return []
     given, default = _flat(to_dict(config)), _flat(to_dict(preset))
-    keep = {"load_dir", "data"}
+    keep = {"load_dir", "data", "threads", "device"}
     return sorted(f"--{k.replace('_', '-')}" for k, v in given.items() if k not in keep and default.get(k) != v)
 
 

@@ -29,9 +29,10 @@ def build_config(config: TrainerConfig) -> tuple[TrainerConfig, list[str]]:
             fail(
                 f"{' '.join(ignored)} would be ignored: a resumed run continues with its own saved config "
                 "(every schedule is a fraction of its length)",
-                f"resume with only --load-dir {config.load_dir} (and --data if its scene moved), or start a new run",
+                f"resume with only --load-dir {config.load_dir} (and --data if its scene moved, --threads, "
+                "--device), or start a new run",
             )
-        return resume_config(config.method_name, config.load_dir, config.data), []
+        return resume_config(config.method_name, config.load_dir, config.data, config), []
     if config.data is None and str(config.pipeline.datamanager.dataparser.data) == ".":
         fail("no scene given", "pass --data PATH_TO_SCENE (e.g. --data demo/lego_tiny), or --load-dir RUN to resume")
     check_training_options(config)  # before any file of the scene is read

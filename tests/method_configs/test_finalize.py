@@ -23,6 +23,7 @@ from fourierf_plugin.data.parsers.llff import LLFF_DECLARATION, LLFFDataParserCo
 from fourierf_plugin.data.scene_effects import EffectsConfig, SceneEffects
 from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.method_configs import all_methods, config_registry, finalize, resume_config
+from fourierf_plugin.method_configs.finalize import ignored_on_resume
 from fourierf_plugin.method_configs.scene_presets import (
     REAL_SCENE_SETTINGS,
     VM_REAL_SCENE_SETTINGS,
@@ -178,6 +179,17 @@ def test_resume_config_returns_the_saved_config_set_to_resume_there(saved_run) -
     assert resumed.load_dir == run_dir
     resumed.load_dir = None
     assert resumed == config
+
+
+def test_a_resume_may_say_where_it_runs_and_nothing_else(saved_run) -> None:
+    """``--threads``/``--device`` apply to a resumed run; any other flag would be ignored, so it is named instead."""
+    run_dir, _ = saved_run
+    command = parse_args(["fourierf-vm", "--load-dir", str(run_dir), "--threads", "1", "--device", "cpu"])
+    assert ignored_on_resume(command) == []
+    resumed = resume_config("fourierf-vm", run_dir, machine=command)
+    assert (resumed.threads, resumed.device) == (1, "cpu")
+    longer = parse_args(["fourierf-vm", "--load-dir", str(run_dir), "--max-num-iterations", "99", "--seed", "3"])
+    assert ignored_on_resume(longer) == ["--max-num-iterations", "--seed"]
 
 
 def test_resume_config_refuses_another_method(saved_run) -> None:

@@ -404,6 +404,8 @@ CASES: dict[str, Case] = {
         on_run(["--load-config", "{config}", "--output-path", "{tmp}/file.txt/eval.json"], extra=plain_file),
         ("cannot write to", "file.txt", "--output-path"),
     ),
+    "eval: zero threads": Case("eval", on_run(EVAL, extra=lambda tmp, _: ["--threads", "0"]), ("--threads 0",)),
+    "export: zero threads": Case("export", on_run(EXPORT, extra=lambda tmp, _: ["--threads", "0"]), ("--threads 0",)),
     "render: a frame larger than the memory": Case(
         "render",
         on_run(RENDER, extra=lambda tmp, _: ["--resolution-scale", "3000"]),

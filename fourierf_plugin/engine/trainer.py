@@ -247,6 +247,8 @@ class Trainer:
             self.console.print(f"resume with: fourierf-train {c.method_name} --load-dir {self.run_dir}")
             raise SystemExit(interrupt.exit_code)
         done_record = {"event": "done", "step": done, "train_seconds": elapsed}
+        if self.device.type == "cuda":
+            done_record["peak_device_memory_gb"] = torch.cuda.max_memory_allocated(self.device) / 2**30
         if timer is not None:
             phase_totals.update(timer.take())
             done_record["phases_total"] = dict(phase_totals)

@@ -1,3 +1,3 @@
 """fourierf: FourieRF few-shot radiance fields as a self-contained nerfstudio-style plugin."""
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"

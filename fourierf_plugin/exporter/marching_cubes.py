@@ -38,7 +38,7 @@ from skimage.measure import marching_cubes
 from torch import Tensor
 
 from fourierf_plugin.utils.errors import UserError, fail
-from fourierf_plugin.utils.memory import check_fits
+from fourierf_plugin.utils.memory import available_memory, check_fits
 
 LevelKind = Literal["density", "opacity"]
 Level = Literal["auto"] | float
@@ -397,11 +397,15 @@ def export_field_mesh(
         fail(f"--min-component-faces {min_component_faces} is negative", "pass 0 to keep every piece")
     if keep_largest is not None and keep_largest < 1:
         fail(f"--keep-largest {keep_largest} must be at least 1", "omit it to keep every piece")
-    check_fits(
-        BYTES_PER_VERTEX * math.prod(reso),
-        f"a {reso[0]}x{reso[1]}x{reso[2]} marching-cubes grid (--resolution)",
-        "pass a smaller --resolution (e.g. 256)",
-    )
+    free = available_memory()
+    if free is not None:
+        largest = int((free / BYTES_PER_VERTEX) ** (1 / 3) + 1e-6)
+        check_fits(
+            BYTES_PER_VERTEX * math.prod(reso),
+            f"a {reso[0]}x{reso[1]}x{reso[2]} marching-cubes grid (--resolution)",
+            f"pass at most --resolution {largest} on this machine",
+            free,
+        )
     aabb = model.aabb.detach().cpu().double().numpy()
     lo, hi = check_bbox(*(bbox if bbox is not None else (aabb[0], aabb[1])))
     device = model.aabb.device

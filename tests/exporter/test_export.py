@@ -359,3 +359,16 @@ def test_the_default_export_of_a_trained_demo_run_is_one_dominant_piece(tmp_path
     assert report.level_reason.startswith("auto: the highest tried level"), describe(report)
     faces = np.bincount(component_labels(trimesh.load(tmp_path / "mesh.ply")))
     assert faces.max() >= 0.9 * faces.sum() and faces.sum() > 1000, describe(report)
+
+
+def test_a_grid_over_the_available_memory_is_refused_before_sampling(
+    tiny: TinyRun, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The export estimates its memory first (12 bytes a vertex): over what is available, the flag and a value that
+    fits are named, and nothing is sampled."""
+    monkeypatch.setattr("fourierf_plugin.exporter.marching_cubes.available_memory", lambda: 12 * 40**3)
+    monkeypatch.setattr("fourierf_plugin.exporter.marching_cubes.sample_grid", lambda *a, **k: pytest.fail("sampled"))
+    with pytest.raises(UserError) as info:
+        export_field_mesh(tiny.model, tiny.step, None, resolution=64)
+    assert "64x64x64 marching-cubes grid (--resolution)" in info.value.problem
+    assert info.value.fix == "pass at most --resolution 40 on this machine"

@@ -64,7 +64,7 @@ def filter_lines(lines: Tensor, f: float) -> Tensor:
     f = check_cutoff(f)
     if lines.dim() == 0 or line_weights(lines.shape[-1], f)[1]:
         return fourier.filter_lines(lines, f)  # the identity (or the reference's error for a bad shape)
-    return _LowPass.apply(lines, lambda x: fourier.filter_lines(x, f))
+    return _LowPass.apply(lines, lambda x: fourier.apply_line_mask(x, f))  # checked once, here
 
 
 def _fft_slowdown(n: int) -> int:

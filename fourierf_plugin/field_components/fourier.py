@@ -27,6 +27,7 @@ from torch import Tensor
 
 __all__ = [
     "OFFICIAL_PLANE_LEAKAGE",
+    "apply_line_mask",
     "check_cutoff",
     "check_leakage",
     "check_plane_filter",
@@ -142,6 +143,12 @@ def filter_lines(lines: Tensor, f: float) -> Tensor:
     length = _check_size("line length (last dim)", lines.shape[-1] if lines.dim() > 0 else 0)
     if line_weights(length, f)[1]:
         return lines
+    return apply_line_mask(lines, f)
+
+
+def apply_line_mask(lines: Tensor, f: float) -> Tensor:
+    """The line low-pass itself, ``irfft(rfft(x) * mask)``, for a cutoff and length the caller has checked."""
+    length = lines.shape[-1]
     dtype = work_dtype(lines)
     mask = _line_mask_cached(length, f, device_key(lines.device), dtype)
     return torch.fft.irfft(torch.fft.rfft(lines.to(dtype), dim=-1) * mask, n=length, dim=-1).to(lines.dtype)

@@ -6,6 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+import torch
+
 
 @dataclass
 class AccelConfig:
@@ -32,3 +34,13 @@ class AccelConfig:
     """Renders stop querying a ray once its transmittance is below this (0 = march every sample)."""
     early_stop_segment: int = 128
     """Samples per ray marched between two early-stop checks."""
+    gpu_paths: bool | None = None
+    """The forms that keep a GPU busy: no host synchronisation inside a training step but one compaction of the shaded
+    samples (a fixed sample count, density at every sample, masks and random numbers made on the device, metrics
+    read once per log interval), grid_sample lookups and FFT filters. None: on wherever the device is not a CPU;
+    True forces them on a CPU (to check them there; slower)."""
+
+
+def uses_gpu_paths(config: AccelConfig, device: torch.device | str) -> bool:
+    """Whether a model on ``device`` takes the GPU forms (``AccelConfig.gpu_paths``)."""
+    return config.gpu_paths if config.gpu_paths is not None else torch.device(device).type != "cpu"

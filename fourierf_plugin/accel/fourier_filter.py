@@ -184,15 +184,16 @@ def _band_filter(x: Tensor, operators: tuple[Tensor, Tensor, Tensor, bool], leak
     return out + leakage * x if leakage else out
 
 
-def filter_planes(planes: Tensor, f: float, leakage: float = 0.0) -> Tensor:
-    """``fourier.filter_planes`` in FFT or matrix form, whichever the cost model says is cheaper, with the
-    self-adjoint backward. Exact either way (the tests compare both with the reference to 1e-11 in float64)."""
+def filter_planes(planes: Tensor, f: float, leakage: float = 0.0, matrix_form: bool = True) -> Tensor:
+    """``fourier.filter_planes`` in FFT or matrix form, whichever the cost model says is cheaper (FFT only unless
+    ``matrix_form``), with the self-adjoint backward. Exact either way (the tests compare both with the reference to
+    1e-11 in float64)."""
     f, leakage, height, width = check_plane_filter(planes, f, leakage)
     if plane_is_full(height, width, f):
         return unfiltered_planes(planes, leakage)
     dtype = work_dtype(planes)
     device = device_key(planes.device)
-    if _prefer_band(height, width, f):
+    if matrix_form and _prefer_band(height, width, f):
         operators = _band_operators(height, width, f, device, dtype)
 
         def lowpass(x: Tensor) -> Tensor:

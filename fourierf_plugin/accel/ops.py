@@ -22,7 +22,7 @@ from torch import Tensor, nn
 from torch.utils.checkpoint import checkpoint
 
 from fourierf_plugin.accel import fourier_filter, tv
-from fourierf_plugin.accel.config import AccelConfig
+from fourierf_plugin.accel.config import AccelConfig, uses_gpu_paths
 from fourierf_plugin.accel.dense_tables import dense_table
 from fourierf_plugin.accel.fused_decoder import fused_decode
 from fourierf_plugin.accel.lookups import GATHER, interp_volume, row_table
@@ -43,14 +43,19 @@ class AcceleratedOps(GridOps):
     def __init__(self, config: AccelConfig, device: torch.device | str) -> None:
         device = torch.device(device)
         self.config = config
-        self.gather = device.type == "cpu"  # grid_sample's CPU kernels (and its backward) are the slow part there
+        cpu = not uses_gpu_paths(config, device)
+        self.gather = cpu  # grid_sample's CPU kernels (and its backward) are the slow part there
         self.lookup = GATHER if self.gather else GRID_SAMPLE
         precision = config.decoder_precision
-        self.bf16_training = precision == "bfloat16" and device.type == "cpu"
-        self.bf16_renders = self.bf16_training or (precision == "auto" and native_bfloat16(device))
+        self.bf16_training = precision == "bfloat16" and cpu
+        self.bf16_renders = self.bf16_training or (precision == "auto" and cpu and native_bfloat16(device))
+        # The matrix form of the plane filter is rebuilt on the host whenever the cutoff moves: CPU only.
+        self.matrix_filters = cpu
 
     filter_lines = staticmethod(fourier_filter.filter_lines)  # type: ignore[assignment]
-    filter_planes = staticmethod(fourier_filter.filter_planes)  # type: ignore[assignment]
+
+    def filter_planes(self, planes: Tensor, f: float, leakage: float = 0.0) -> Tensor:
+        return fourier_filter.filter_planes(planes, f, leakage, matrix_form=self.matrix_filters)
 
     def squared_differences(self, x: Tensor, dims: tuple[int, ...], scales: tuple[float, ...]) -> Tensor:
         return tv.squared_differences(x, dims, scales)
@@ -123,7 +128,8 @@ class AcceleratedOps(GridOps):
     def _density_fits(self, grid: TensorGrid, rendering: bool) -> bool:
         if rendering:
             return self._table_mb(grid) <= self.config.dense_render_max_mb
-        return math.prod(grid.resolution) <= self.config.dense_train_max_vertices
+        # Training tables are a CPU form (gathers beat grid_sample there); a GPU reads the factors directly.
+        return self.gather and math.prod(grid.resolution) <= self.config.dense_train_max_vertices
 
     @staticmethod
     def _table(

@@ -42,13 +42,20 @@ def camera_rays(cameras: Cameras, index: int, ray_space: RaySpace) -> tuple[Tens
     return cameras.generate_rays(index)
 
 
+def to_device(tensor: Tensor, device: torch.device) -> Tensor:
+    """A host tensor on ``device``; to a GPU through pinned memory, so the copy runs without stalling the host."""
+    if device.type == "cuda":
+        return tensor.pin_memory().to(device, non_blocking=True)
+    return tensor.to(device)
+
+
 def all_rays(outputs: DataparserOutputs, device: torch.device, ray_space: RaySpace = "euclidean") -> RayBatch:
     """Rays and targets of every pixel of every image of a split, image by image, row-major."""
     rays = [camera_rays(outputs.cameras, i, ray_space) for i in range(len(outputs.cameras))]
     return RayBatch(
-        torch.cat([r[0] for r in rays]).to(device),
-        torch.cat([r[1] for r in rays]).to(device),
-        outputs.images.reshape(-1, 4).to(device),
+        to_device(torch.cat([r[0] for r in rays]), device),
+        to_device(torch.cat([r[1] for r in rays]), device),
+        to_device(outputs.images.reshape(-1, 4), device),
     )
 
 
@@ -67,7 +74,7 @@ class DataManager:
     ):
         self.config = config
         self.device = device
-        self.generator = generator
+        self.generator = generator  # batches are drawn where it lives (the device, for a GPU step without copies)
         self.parser = config.dataparser.setup()
         self.ray_space = ray_space
         self.train_outputs: DataparserOutputs | None = None
@@ -78,7 +85,7 @@ class DataManager:
         self.load_train = load_train
         if load_train:
             self.train_outputs = self.parser.get_outputs("train")
-            self.active = torch.arange(self.train_outputs.images[..., 0].numel())
+            self.active = torch.arange(self.train_outputs.images[..., 0].numel(), device=generator.device)
 
     @property
     def train_rays(self) -> RayBatch | None:
@@ -96,7 +103,8 @@ class DataManager:
     def keep_rays(self, keep: Callable[[Tensor, Tensor], Tensor]) -> int:
         """Drop training rays for which ``keep(origins, directions)`` is False; returns how many remain."""
         assert self.train_rays is not None
-        mask = keep(self.train_rays.origins[self.active], self.train_rays.directions[self.active]).cpu()
+        active = self.active.to(self.device)
+        mask = keep(self.train_rays.origins[active], self.train_rays.directions[active]).to(self.active.device)
         if not bool(mask.any()):
             return int(self.active.numel())  # never filter down to nothing; the caller warns
         self.active = self.active[mask]
@@ -111,7 +119,8 @@ class DataManager:
         if size == 0:
             fail("no training rays left", "check the scene box and near/far planes of the dataset")
         if self._cursor + size > self._order.numel():
-            self._order = self.active[torch.randperm(self.active.numel(), generator=self.generator)]
+            perm = torch.randperm(self.active.numel(), generator=self.generator, device=self.generator.device)
+            self._order = self.active[perm]
             self._cursor = 0
         idx = self._order[self._cursor : self._cursor + size].to(self.device)
         self._cursor += size
@@ -126,7 +135,7 @@ class DataManager:
             yield EvalView(
                 outputs.image_names[i],
                 outputs.view_ids[i],
-                RayBatch(o.to(self.device), d.to(self.device), rgba.to(self.device)),
+                RayBatch(to_device(o, self.device), to_device(d, self.device), to_device(rgba, self.device)),
                 outputs.cameras.height,
                 outputs.cameras.width,
             )
@@ -135,8 +144,8 @@ class DataManager:
         return {"active": self.active.clone(), "order": self._order.clone(), "cursor": self._cursor}
 
     def load_state_dict(self, state: dict) -> None:
-        self.active = state["active"].long()
-        self._order = state["order"].long()
+        self.active = state["active"].long().to(self.generator.device)
+        self._order = state["order"].long().to(self.generator.device)
         self._cursor = int(state["cursor"])
 
 

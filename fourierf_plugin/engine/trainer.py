@@ -17,6 +17,7 @@ import tyro
 from rich.markup import escape
 
 from fourierf_plugin import __version__
+from fourierf_plugin.accel.config import uses_gpu_paths
 from fourierf_plugin.configs.base import InstantiateConfig, save_config
 from fourierf_plugin.engine.checkpoint import load_latest_checkpoint, save_checkpoint
 from fourierf_plugin.engine.estimates import describe_cost
@@ -209,6 +210,9 @@ class Trainer:
         # With --profile-phases the loop body is timed phase by phase (logging and saving excluded).
         timer = PhaseTimer() if c.profile_phases else None
         phase_totals: Counter[str] = Counter()  # update() adds the seconds of each log interval
+        # On the GPU paths the metrics are read from the device once per log interval, not every step.
+        read_every_step = not uses_gpu_paths(c.pipeline.model.accel, self.device)
+        shown: dict[str, float] = {}
         with _DeferredStop() as interrupt, TaskProgress(c.max_num_iterations, self.start_step) as progress:
             for step in range(self.start_step, c.max_num_iterations):
                 with timer or contextlib.nullcontext(), phase("other"):
@@ -224,9 +228,12 @@ class Trainer:
                         optimizer = build_optimizer(c.optimizer, model.param_groups())
                 done = step + 1
                 f_density, f_color = model.cutoffs(step)
-                progress.update(done, loss=metrics["loss"], psnr=metrics["psnr"], f=f_density)
-                if done % c.log_every == 0 or done == c.max_num_iterations:
-                    record = {"step": done, **metrics, "f_density": f_density, "f_color": f_color, "lr_scale": lr_scale}
+                log_now = done % c.log_every == 0 or done == c.max_num_iterations
+                if log_now or read_every_step:
+                    shown = self.pipeline.read_metrics(metrics)
+                progress.update(done, **{k: shown[k] for k in ("loss", "psnr") if k in shown}, f=f_density)
+                if log_now:
+                    record = {"step": done, **shown, "f_density": f_density, "f_color": f_color, "lr_scale": lr_scale}
                     record["elapsed_s"] = time.perf_counter() - started
                     record["rays"] = int(self.pipeline.datamanager.active.numel())
                     if timer is not None:

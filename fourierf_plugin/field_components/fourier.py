@@ -49,6 +49,7 @@ OFFICIAL_PLANE_LEAKAGE = 1e-6
 """Out-of-band weight the official code adds to every plane-mask entry (the paper uses 0)."""
 
 _CACHE_SIZE = 256
+_MASK_CACHE_SIZE = 32  # device tensors: the masks of a few cutoffs (renders reuse one; training moves every step)
 
 
 # ----------------------------------------------------------------------------------------------------------- checks
@@ -116,10 +117,15 @@ def line_weights(length: int, f: float) -> tuple[tuple[float, ...], bool]:
     return tuple(weights), all(w == 1.0 for w in weights)
 
 
-@lru_cache(maxsize=_CACHE_SIZE)
+@lru_cache(maxsize=_MASK_CACHE_SIZE)
 def _line_mask_cached(length: int, f: float, device: str, dtype: torch.dtype) -> Tensor:
-    weights, _ = line_weights(length, f)
-    return torch.tensor(weights, dtype=torch.float64).to(device=device, dtype=dtype)
+    """``line_weights`` made on ``device`` (no host copy): bin k keeps clamp(c - k, 0, 1) with c = bins f, DC always."""
+    bins = length // 2 + 1
+    edge = bins * f
+    k = torch.arange(bins, dtype=torch.float64, device=device)
+    weights = (edge - k).clamp(0.0, 1.0)
+    weights[0] = 1.0
+    return weights.to(dtype)
 
 
 def line_mask(
@@ -167,9 +173,9 @@ def kept_fraction_lines(length: int, f: float) -> float:
 
 
 # ----------------------------------------------------------------------------------------------------------- planes
-def signed_frequencies(n: int) -> Tensor:
+def signed_frequencies(n: int, device: torch.device | str | None = None) -> Tensor:
     """Integer frequencies in ``fft`` order, i.e. ``fftfreq(n) * n`` without the float round trip."""
-    idx = torch.arange(n, dtype=torch.int64)
+    idx = torch.arange(n, dtype=torch.int64, device=device)
     return (idx + n // 2) % n - n // 2
 
 
@@ -183,13 +189,13 @@ def plane_is_full(height: int, width: int, f: float) -> bool:
     return (height // 2) ** 2 + (width // 2) ** 2 <= disc_radius_sq(height, width, f)
 
 
-@lru_cache(maxsize=_CACHE_SIZE)
+@lru_cache(maxsize=_MASK_CACHE_SIZE)
 def plane_mask_cached(height: int, width: int, f: float, leakage: float, device: str, dtype: torch.dtype) -> Tensor:
-    kh = signed_frequencies(height).to(torch.float64)[:, None]
-    kw = torch.arange(width // 2 + 1, dtype=torch.float64)[None, :]
+    """``plane_mask`` made on ``device`` from the cutoff (no host copy while the cutoff moves every step)."""
+    kh = signed_frequencies(height, device).to(torch.float64)[:, None]
+    kw = torch.arange(width // 2 + 1, dtype=torch.float64, device=device)[None, :]
     inside = (kh * kh + kw * kw) <= disc_radius_sq(height, width, f)
-    mask = inside.to(torch.float64) + leakage
-    return mask.to(device=device, dtype=dtype)
+    return (inside.to(torch.float64) + leakage).to(dtype)
 
 
 def plane_mask(

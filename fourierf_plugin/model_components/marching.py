@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
+import torch
 from torch import Tensor
 
 from fourierf_plugin.model_components.gradient_scaling import scale_gradient
@@ -42,6 +43,18 @@ def densities(density: DensityFn, samples: RaySamples, occupancy: OccupancyGrid)
     if index.numel():
         sigma = sigma.index_put((index,), density(selected))
     return sigma.view(num_rays, num_samples)
+
+
+def densities_everywhere(density: DensityFn, samples: RaySamples, occupancy: OccupancyGrid) -> Tensor:
+    """``densities`` without compaction: the field is read at every sample and σ kept where the sample is inside the
+    box and in an occupied cell. More lookups, but no output shape that depends on the data, so a GPU never waits
+    for the host to learn how many samples survived."""
+    points = samples.points.view(-1, 3)
+    keep = samples.inside.view(-1)
+    if occupancy.active:
+        keep = keep & occupancy.query(points)
+    sigma = density(points)
+    return torch.where(keep, sigma, torch.zeros_like(sigma)).view(samples.shape)
 
 
 def densities_until_opaque(

@@ -62,6 +62,7 @@ class OccupancyGrid(nn.Module):
         super().__init__()
         self.register_buffer("cells", torch.zeros(0, 0, 0, dtype=torch.bool))
         self.register_buffer("aabb", torch.zeros(2, 3))
+        self._bounds: tuple[tuple, list[float], list[float]] | None = None  # (key, lo, hi) of ``aabb`` on the host
 
     @property
     def active(self) -> bool:
@@ -80,7 +81,7 @@ class OccupancyGrid(nn.Module):
         if not self.active:
             return torch.ones(xyz.shape[0], dtype=torch.bool, device=xyz.device)
         shape = self.cells.shape
-        lo, hi = self.aabb[0].tolist(), self.aabb[1].tolist()
+        lo, hi = self._host_bounds()
         inside: Tensor | None = None
         flat: Tensor | None = None
         for axis, cells in enumerate(shape):
@@ -91,3 +92,10 @@ class OccupancyGrid(nn.Module):
             flat = index if flat is None else flat * cells + index
         assert inside is not None and flat is not None
         return inside & self.cells.reshape(-1).index_select(0, flat)
+
+    def _host_bounds(self) -> tuple[list[float], list[float]]:
+        """The box corners as Python floats, read from the device once per box (not once per query)."""
+        key = (id(self.aabb), self.aabb._version)
+        if self._bounds is None or self._bounds[0] != key:
+            self._bounds = (key, self.aabb[0].tolist(), self.aabb[1].tolist())
+        return self._bounds[1], self._bounds[2]

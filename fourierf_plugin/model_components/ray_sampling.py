@@ -9,6 +9,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from fourierf_plugin.model_components.rendering import random_on
+
 _MIN_DIR = 1e-6
 
 
@@ -72,16 +74,21 @@ def box_samples(
     step: float,
     max_samples: int,
     generator: torch.Generator | None = None,
+    fixed_count: bool = False,
 ) -> RaySamples:
     """TensoRF's marcher: fixed steps from where each (unit-direction) ray enters the box, as many as the longest
-    ray needs (at most ``max_samples``); with a ``generator`` each ray is shifted by its own random fraction of a
-    step (training), without one the samples sit on the step grid (renders)."""
+    ray needs (at most ``max_samples``; exactly ``max_samples`` when ``fixed_count``, which spares a GPU the read of
+    the longest ray, the extra samples lying outside the box); with a ``generator`` each ray is shifted by its own
+    random fraction of a step (training), without one the samples sit on the step grid (renders)."""
     num_rays = origins.shape[0]
     start, t_exit = ray_box_span(origins, directions, aabb, near, far)
-    span = ((t_exit - start) / step).clamp(min=0)
-    needed = math.ceil(float(span.max())) + 1 if num_rays else 0
-    num_samples = max(1, min(max_samples, needed))
-    jitter = torch.rand(num_rays, generator=generator).to(origins.device) if generator is not None else None
+    if fixed_count:
+        num_samples = max(1, max_samples)
+    else:
+        span = ((t_exit - start) / step).clamp(min=0)
+        needed = math.ceil(float(span.max())) + 1 if num_rays else 0
+        num_samples = max(1, min(max_samples, needed))
+    jitter = random_on(generator, (num_rays,)).to(origins.device) if generator is not None else None
     t = step_samples(start, step, num_samples, jitter)
     return RaySamples(t, sample_deltas(t), _points(origins, directions, t), t < t_exit.unsqueeze(-1), directions)
 
@@ -100,7 +107,7 @@ def ndc_samples(
     num_rays, device = origins.shape[0], origins.device
     t = torch.linspace(near, far, num_samples, device=device).expand(num_rays, num_samples)
     if generator is not None:
-        jitter = torch.rand(num_rays, num_samples, generator=generator).to(device)
+        jitter = random_on(generator, (num_rays, num_samples)).to(device)
         t = t + jitter * ((far - near) / num_samples)
     points = _points(origins, directions, t)
     inside = ((points >= aabb[0]) & (points <= aabb[1])).all(dim=-1)

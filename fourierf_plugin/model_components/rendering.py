@@ -49,10 +49,19 @@ def composite_target(rgba: Tensor, background: Tensor) -> Tensor:
     return rgba[..., :3] + (1.0 - rgba[..., 3:4]) * background
 
 
-def background_color(kind: str, num_rays: int, device: torch.device, generator: torch.Generator | None) -> Tensor:
+def background_color(
+    kind: str,
+    num_rays: int,
+    device: torch.device,
+    generator: torch.Generator | None,
+    device_generator: torch.Generator | None = None,
+) -> Tensor:
     """The training background a scene declared: white, black, a random colour per ray, or — for "none", photos
     that have no background — black or white with even odds per batch, so only full absorption (acc = 1) fits both
-    (TensoRF's LLFF trick; on black alone an empty start gets no gradient at all)."""
+    (TensoRF's LLFF trick; on black alone an empty start gets no gradient at all).
+
+    The coin is tossed on the host (``generator``); per-ray colours are drawn where ``device_generator`` lives
+    (default: ``generator``), so a GPU step copies nothing."""
     if kind == "none":
         kind = "white" if float(torch.rand(1, generator=generator)) < 0.5 else "black"
     if kind == "white":
@@ -60,5 +69,10 @@ def background_color(kind: str, num_rays: int, device: torch.device, generator: 
     if kind == "black":
         return torch.zeros(3, device=device)
     if kind == "random":
-        return torch.rand(num_rays, 3, generator=generator, device="cpu").to(device)
+        return random_on(device_generator or generator, (num_rays, 3)).to(device)
     raise ValueError(f"unknown background {kind!r}")
+
+
+def random_on(generator: torch.Generator | None, shape: tuple[int, ...]) -> Tensor:
+    """Uniform [0, 1) numbers drawn where the generator lives (the CPU without one)."""
+    return torch.rand(shape, generator=generator, device=generator.device if generator is not None else "cpu")

@@ -15,13 +15,19 @@ import torch
 from torch import Tensor, nn
 
 from fourierf_plugin.accel import AccelConfig, build_ops
+from fourierf_plugin.accel.config import uses_gpu_paths
 from fourierf_plugin.configs.base import InstantiateConfig
 from fourierf_plugin.data.scene_effects import SceneEffects
 from fourierf_plugin.field_components import schedules
 from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig, FourierTensoRFField
 from fourierf_plugin.model_components import losses
 from fourierf_plugin.model_components.gradient_scaling import floaters_scale, scale_gradient
-from fourierf_plugin.model_components.marching import densities, densities_until_opaque, shade
+from fourierf_plugin.model_components.marching import (
+    densities,
+    densities_everywhere,
+    densities_until_opaque,
+    shade,
+)
 from fourierf_plugin.model_components.occupancy import (
     OccupancyGrid,
     occupancy_from_alpha,
@@ -92,12 +98,18 @@ class FourieRFModel(nn.Module):
         max_iters: int,
         generator: torch.Generator,
         device: torch.device | str = "cpu",
+        step_generator: torch.Generator | None = None,
     ) -> None:
+        """``generator`` draws the initial grids and the host's coin tosses; ``step_generator`` (default: the same)
+        the per-step random numbers, on the device it lives on."""
         super().__init__()
         self.config = config
         self.near, self.far = float(near), float(far)
         self.max_iters = int(max_iters)
         self.generator = generator
+        self.step_generator = step_generator if step_generator is not None else generator
+        self.gpu_paths = uses_gpu_paths(config.accel, device)
+        self._box: tuple[tuple, list[float]] | None = None
         self.effects = effects
         fc = config.field
         self.upsample_steps = schedules.steps_from_fractions(fc.upsample_fractions, max_iters)
@@ -139,7 +151,11 @@ class FourieRFModel(nn.Module):
         return self.field.aabb
 
     def _box_size(self) -> list[float]:
-        return (self.aabb[1] - self.aabb[0]).tolist()
+        """The box's extent on the host, read from the device once per box (not once per step)."""
+        key = (id(self.aabb), self.aabb._version)
+        if self._box is None or self._box[0] != key:
+            self._box = (key, (self.aabb[1] - self.aabb[0]).tolist())
+        return self._box[1]
 
     @property
     def step_size(self) -> float:
@@ -164,7 +180,7 @@ class FourieRFModel(nn.Module):
         """
         if background is None:
             kind = self.effects.background if self.training else self.effects.eval_background
-            background = background_color(kind, origins.shape[0], origins.device, self.generator)
+            background = background_color(kind, origins.shape[0], origins.device, self.generator, self.step_generator)
         with phase("sampling"):
             samples = self.sample(origins, directions)
         with phase("density"):
@@ -191,15 +207,18 @@ class FourieRFModel(nn.Module):
 
     def sample(self, origins: Tensor, directions: Tensor) -> RaySamples:
         """Fixed steps through the box (euclidean rays) or even steps along NDC rays; jittered in training."""
-        generator = self.generator if self.training else None
+        generator = self.step_generator if self.training else None
         num = self.samples_per_ray(self.training)
         if self.effects.ray_space == "ndc":
             return ndc_samples(origins, directions, self.aabb, self.near, self.far, num, generator)
-        return box_samples(origins, directions, self.aabb, self.near, self.far, self.step_size, num, generator)
+        fixed = self.gpu_paths and self.training
+        return box_samples(origins, directions, self.aabb, self.near, self.far, self.step_size, num, generator, fixed)
 
     def march(self, samples: RaySamples) -> Tensor:
         """σ [R, N] at the samples in occupied cells; renders may stop each ray once it is opaque."""
         accel = self.config.accel
+        if self.training and self.gpu_paths:
+            return densities_everywhere(self.field.density, samples, self.occupancy)
         if self.training or accel.early_stop_transmittance <= 0:
             return densities(self.field.density, samples, self.occupancy)
         return densities_until_opaque(

@@ -10,6 +10,7 @@ from typing import ClassVar
 import torch
 from torch import Tensor
 
+from fourierf_plugin.accel.config import uses_gpu_paths
 from fourierf_plugin.configs.base import InstantiateConfig
 from fourierf_plugin.data.datamanager import DataManager, DataManagerConfig, EvalView
 from fourierf_plugin.data.dataparser_base import Split
@@ -44,8 +45,9 @@ class Pipeline:
         self.config = config
         self.device = device
         self.effects = config.effects.effects()
+        self.step_generator = step_generator(generator, device, uses_gpu_paths(config.model.accel, device))
         self.datamanager: DataManager = config.datamanager.setup(
-            device=device, generator=generator, ray_space=self.effects.ray_space, load_train=load_train
+            device=device, generator=self.step_generator, ray_space=self.effects.ray_space, load_train=load_train
         )
         scene = self.datamanager.reference_outputs
         self.model: FourieRFModel = config.model.setup(
@@ -56,10 +58,13 @@ class Pipeline:
             max_iters=max_iters,
             generator=generator,
             device=device,
+            step_generator=self.step_generator,
         ).to(device)
+        self._generator = generator
 
-    def train_step(self, step: int) -> tuple[Tensor, dict[str, float]]:
-        """Loss for one batch at ``step``; the grids are filtered once here and reused by every term."""
+    def train_step(self, step: int) -> tuple[Tensor, dict[str, Tensor]]:
+        """Loss for one batch at ``step`` and the step's metrics, still on the device (``read_metrics`` reads them:
+        a GPU step need not wait for them); the grids are filtered once here and reused by every term."""
         with phase("data"):
             batch = self.datamanager.next_batch()
         self.model.prepare(step)
@@ -67,10 +72,16 @@ class Pipeline:
         with phase("losses"):
             loss_terms = self.model.loss_dict(outputs, batch.rgba, step)
             loss = torch.stack(list(loss_terms.values())).sum()
-        metrics = {k: float(v.detach()) for k, v in loss_terms.items()}
-        metrics["loss"] = float(loss.detach())
-        metrics["psnr"] = -10.0 * torch.log10(loss_terms["mse"].detach().clamp(min=1e-10)).item()
+        metrics = {k: v.detach() for k, v in loss_terms.items()}
+        metrics["loss"] = loss.detach()
+        metrics["psnr"] = -10.0 * torch.log10(metrics["mse"].clamp(min=1e-10))
         return loss, metrics
+
+    @staticmethod
+    def read_metrics(metrics: dict[str, Tensor]) -> dict[str, float]:
+        """The metrics of a step as numbers, in one read from the device."""
+        values = torch.stack([v.reshape(()).float() for v in metrics.values()]).tolist()
+        return dict(zip(metrics, values, strict=True))
 
     def after_step(self, step: int) -> Changes:
         with phase("structure"):
@@ -100,12 +111,26 @@ class Pipeline:
             )
 
     def state_dict(self) -> dict:
-        return {"model": self.model.state_dict(), "datamanager": self.datamanager.state_dict()}
+        state = {"model": self.model.state_dict(), "datamanager": self.datamanager.state_dict()}
+        if self.step_generator is not self._generator:
+            state["step_generator"] = self.step_generator.get_state()
+        return state
 
     def load_state_dict(self, state: dict) -> None:
         self.model.load_state_dict(state["model"])
+        if "step_generator" in state and self.step_generator is not self._generator:
+            self.step_generator.set_state(state["step_generator"])
         if "datamanager" in state and self.datamanager.load_train:
             self.datamanager.load_state_dict(state["datamanager"])
+
+
+def step_generator(generator: torch.Generator, device: torch.device, gpu_paths: bool) -> torch.Generator:
+    """Where a step's random numbers come from: the run's generator on a CPU (what it always was); on the GPU paths
+    a generator of its own on the device, seeded from the run's seed (drawing nothing from it, so the initial grids
+    are the same either way), so that batches and jitter are drawn there."""
+    if not gpu_paths:
+        return generator
+    return torch.Generator(device=device).manual_seed(generator.initial_seed() + 1)
 
 
 @dataclass

@@ -171,8 +171,10 @@ def main() -> None:
             timings[side].append(time_iterations(codes[side], first[side]))
     (args.work / "iterations.json").write_text(json.dumps(timings))
     old_it, new_it = statistics.median(timings["old"]), statistics.median(timings["new"])
-    print(f"| s/iteration at step 700, in-process ({args.iteration_repeats} alternating repeats of 40) | "
-          f"{old_it:.4f} | {new_it:.4f} | {new_it / old_it:.3f} |")
+    print(
+        f"| s/iteration at step 700, in-process ({args.iteration_repeats} alternating repeats of 40) | "
+        f"{old_it:.4f} | {new_it:.4f} | {new_it / old_it:.3f} |"
+    )
     for side in ("old", "new"):
         psnrs = [f"{r['psnr']:.4f} (seed {r['seed']})" for r in rows if r["side"] == side]
         print(f"test PSNR {side}: " + ", ".join(psnrs))

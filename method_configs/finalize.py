@@ -11,6 +11,7 @@ import copy
 from pathlib import Path
 
 from fourierf_plugin.configs.base import config_classes, load_config, to_dict
+from fourierf_plugin.data.parsers.capture_parser import CaptureParserConfig
 from fourierf_plugin.data.scene_effects import EffectsConfig
 from fourierf_plugin.engine.loading import locate_data
 from fourierf_plugin.engine.machine import pick_device
@@ -42,8 +43,12 @@ def finalize(config: TrainerConfig) -> tuple[TrainerConfig, list[str]]:
     parser.data = Path(parser.data).expanduser().resolve()  # config.json must work from any working directory
     config.data = parser.data
     config.output_dir = Path(config.output_dir).expanduser().resolve()
-    declared = config.pipeline.datamanager.dataparser.setup().declaration()
+    declared = parser.setup().declaration()
     notes = []
+    if isinstance(parser, CaptureParserConfig):  # config.json records the decision, so a saved run keeps it
+        parser.pin(declared)
+    if declared.reason:
+        notes.append(f"scene kind: {'object (bounded)' if declared.bounded else 'forward-facing'} ({declared.reason})")
     preset = config.scene_preset
     if preset == "auto":
         preset = "synthetic" if declared.bounded else "real"

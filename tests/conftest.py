@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import importlib
 import os
 from collections.abc import Iterator
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 import torch
@@ -22,6 +24,22 @@ def require_shared(*parts: str) -> Path:
             pytest.fail(f"CI=true but {reason}")
         pytest.skip(reason)
     return path
+
+
+def require_module(name: str, why: str) -> ModuleType:
+    """An optional package (an extra); skips with ``why`` when it is not installed, but fails in CI, which installs
+    every extra the tests use (the dev extra)."""
+    try:
+        return importlib.import_module(name)
+    except ImportError:
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(f"CI=true but {name} is not installed: {why}")
+        pytest.skip(why)
+
+
+@pytest.fixture
+def pycolmap_installed() -> ModuleType:
+    return require_module("pycolmap", "structure-from-motion needs pycolmap (pip install '.[colmap]')")
 
 
 @pytest.fixture

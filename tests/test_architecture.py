@@ -31,12 +31,16 @@ LAYERS: dict[str, int] = {
     f"{PACKAGE}.data.dataparser_base": 2,
     f"{PACKAGE}.data.images": 1,
     f"{PACKAGE}.data.poses": 1,
+    f"{PACKAGE}.data.capture": 1,
+    f"{PACKAGE}.data.colmap_model": 1,
     f"{PACKAGE}.data.view_selection": 1,
     f"{PACKAGE}.synthetic": 1,
     # the field, and the fast forms of its operations
     f"{PACKAGE}.fields": 2,
     f"{PACKAGE}.accel": 3,
     f"{PACKAGE}.data.parsers": 3,
+    f"{PACKAGE}.data.nerfstudio_writer": 3,  # reads LLFF scenes through data.parsers.llff
+    f"{PACKAGE}.sfm": 3,
     f"{PACKAGE}.models": 4,
     f"{PACKAGE}.data.datamanager": 4,
     f"{PACKAGE}.data": 4,  # the package itself (its __init__)

@@ -38,7 +38,7 @@ SOURCE_FOLDERS = {
     REPO_ROOT / "method_configs": "fourierf_plugin/method_configs",
 }
 FORBIDDEN_PREFIXES = ("data/", "method_configs/", "tests/", "demo/", "benchmarks/", "tools/")
-SCRIPTS = ("train", "eval", "export", "render", "synth", "bench")
+SCRIPTS = ("train", "eval", "export", "render", "synth", "bench", "process-data")  # fourierf-NAME
 
 
 def _ignore_build_leftovers(directory: str, names: list[str]) -> set[str]:
@@ -92,7 +92,8 @@ def test_wheel_declares_every_console_script(wheel: zipfile.ZipFile) -> None:
     text = wheel.read(entry_points).decode()
     assert "[console_scripts]" in text
     for name in SCRIPTS:
-        assert f"fourierf-{name} = fourierf_plugin.scripts.{name}:entrypoint" in text, name
+        module = name.replace("-", "_")
+        assert f"fourierf-{name} = fourierf_plugin.scripts.{module}:entrypoint" in text, name
 
 
 @pytest.mark.slow

@@ -12,13 +12,17 @@ import tyro
 
 from fourierf_plugin.data.dataparser_base import DataParserConfig
 from fourierf_plugin.data.parsers.blender import BlenderDataParserConfig
+from fourierf_plugin.data.parsers.colmap import ColmapDataParserConfig
 from fourierf_plugin.data.parsers.llff import LLFFDataParserConfig
+from fourierf_plugin.data.parsers.nerfstudio import NerfstudioDataParserConfig
 
 
 def _discover() -> dict[str, DataParserConfig]:
     found: dict[str, DataParserConfig] = {
         "blender-data": BlenderDataParserConfig(),
         "llff-data": LLFFDataParserConfig(),
+        "nerfstudio-data": NerfstudioDataParserConfig(),
+        "colmap-data": ColmapDataParserConfig(),
     }
     for ep in entry_points(group="fourierf.dataparser_configs"):
         cfg = ep.load()

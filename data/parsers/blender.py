@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 import torch
@@ -23,6 +22,7 @@ from fourierf_plugin.data.poses import rotation_problem
 from fourierf_plugin.data.scene_effects import SceneDeclaration
 from fourierf_plugin.data.view_selection import explicit_views, kmeans_views
 from fourierf_plugin.utils.errors import fail
+from fourierf_plugin.utils.files import read_json_object
 
 _SCENE_FIX = "pass --data pointing at a NeRF-synthetic scene folder (the one holding transforms_train.json)"
 
@@ -64,14 +64,7 @@ def _check_folder(data: Path, split: str) -> Path:
 def _read_transforms(path: Path) -> _Transforms:
     """Parse and validate a transforms JSON; every defect names the file and, where it helps, the frame."""
     fix = "repair the file, or re-download the scene"
-    try:
-        meta: Any = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as err:
-        fail(f"{path} is not valid JSON: {err.msg} at line {err.lineno}, column {err.colno}", fix)
-    except (UnicodeDecodeError, OSError) as err:
-        fail(f"cannot read {path}: {err}", fix)
-    if not isinstance(meta, dict):
-        fail(f"{path} must hold a JSON object with 'camera_angle_x' and 'frames'", fix)
+    meta = read_json_object(path, fix, "'camera_angle_x' and 'frames'")
     missing = [key for key in ("camera_angle_x", "frames") if key not in meta]
     if missing:
         fail(f"{path} lacks the key(s) {missing}", f"add {missing} ('camera_angle_x' is the horizontal FOV in radians)")

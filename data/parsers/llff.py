@@ -15,7 +15,6 @@ from typing import ClassVar
 import numpy as np
 import torch
 
-from fourierf_plugin.cameras.camera_paths import average_pose
 from fourierf_plugin.cameras.cameras import Cameras
 from fourierf_plugin.data.dataparser_base import (
     DataParser,
@@ -24,9 +23,9 @@ from fourierf_plugin.data.dataparser_base import (
     Split,
 )
 from fourierf_plugin.data.images import load_images
-from fourierf_plugin.data.poses import rotation_problem
+from fourierf_plugin.data.poses import recenter_poses, rotation_problem
 from fourierf_plugin.data.scene_effects import SceneDeclaration
-from fourierf_plugin.data.view_selection import explicit_views, regnerf_views
+from fourierf_plugin.data.view_selection import check_view_counts, explicit_views, regnerf_views, validation_views
 from fourierf_plugin.utils.errors import fail
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
@@ -35,14 +34,6 @@ LLFF_DECLARATION = SceneDeclaration(
     background="none", ray_space="ndc", bounded=False, view_dependent=False, occlusion_regularization=True
 )
 _SCENE_FIX = "pass --data pointing at an LLFF scene folder (the one holding poses_bounds.npy and images_8/)"
-
-
-def recenter_poses(c2w: np.ndarray) -> np.ndarray:
-    """Express every [N, 3, 4] pose relative to the average pose (a rigid motion of the whole scene)."""
-    avg = np.eye(4)
-    avg[:3] = average_pose(torch.from_numpy(c2w)).double().numpy()
-    homo = np.concatenate([c2w, np.broadcast_to(np.array([0, 0, 0, 1.0]), (c2w.shape[0], 1, 4))], axis=1)
-    return (np.linalg.inv(avg) @ homo)[:, :3]
 
 
 def load_poses_bounds(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -129,10 +120,7 @@ class LLFFDataParser(DataParser):
             )
         if cfg.hold_every < 2:
             fail(f"--hold-every must be >= 2, got {cfg.hold_every}", "the LLFF protocol holds out every 8th image")
-        if cfg.num_views is not None and cfg.num_views < 1:
-            fail(f"--num-views must be >= 1, got {cfg.num_views}", "omit it to train on every training image")
-        if cfg.val_views < 1:
-            fail(f"--val-views must be >= 1, got {cfg.val_views}", "3 is the default")
+        check_view_counts(cfg.num_views, cfg.val_views)
         if not cfg.bd_factor > 0:
             fail(f"--bd-factor must be > 0, got {cfg.bd_factor}", "the LLFF default is 0.75")
 
@@ -143,7 +131,7 @@ class LLFFDataParser(DataParser):
             return test
         train = [i for i in range(n) if i % cfg.hold_every]
         if split == "val":
-            return self._val_ids(train, self._split_ids("train", n, source), test)
+            return validation_views(train, self._split_ids("train", n, source), test, cfg.val_views)
         if cfg.view_ids is not None:
             chosen = explicit_views(cfg.view_ids, n, str(source))
             held = [i for i in chosen if i % cfg.hold_every == 0]
@@ -161,17 +149,6 @@ class LLFFDataParser(DataParser):
                 )
             return [train[i] for i in regnerf_views(len(train), cfg.num_views)]
         return train
-
-    def _val_ids(self, train: list[int], chosen: list[int], test: list[int]) -> list[int]:
-        """Few-shot runs validate on training images they do not train on, so tuning never sees the test views.
-
-        ``val_views`` of them, evenly spaced; with every training image in use, val falls back to the hold-out set.
-        """
-        in_use = set(chosen)
-        unused = [i for i in train if i not in in_use]
-        if not unused:
-            return test
-        return [unused[j] for j in regnerf_views(len(unused), min(self.config.val_views, len(unused)))]
 
     def get_outputs(self, split: Split) -> DataparserOutputs:
         self._check_config()

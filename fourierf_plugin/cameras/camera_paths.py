@@ -216,4 +216,6 @@ def scale_cameras(cameras: Cameras, factor: float) -> Cameras:
         cameras.cy * sy,
         width,
         height,
+        cameras.camera_model,  # the lens acts on normalised coordinates: the same at any resolution
+        None if cameras.distortion is None else cameras.distortion.clone(),
     )

@@ -45,10 +45,12 @@ class SceneEffects:
 
 @dataclass(frozen=True)
 class SceneDeclaration(SceneEffects):
-    """A parser's declaration: the effects its scene calls for, and whether the scene is bounded (an object in a box)
-    or forward-facing (which picks the real-scene preset)."""
+    """A parser's declaration: the effects its scene calls for, whether the scene is bounded (an object in a box) or
+    forward-facing (which picks the real-scene preset), and why, for parsers that decide it from the data."""
 
     bounded: bool = True
+    reason: str = ""
+    """Why the parser declared this (e.g. how it told a forward-facing capture from an object); empty when fixed."""
 
     def describe(self) -> str:
         return f"{super().describe()}, {'bounded' if self.bounded else 'forward-facing'}"

@@ -114,3 +114,21 @@ def regnerf_views(num_train: int, n: int) -> list[int]:
     if not 1 <= n <= num_train:
         raise ValueError(f"cannot pick {n} of {num_train} training views")
     return [int(i) for i in np.round(np.linspace(0, num_train - 1, n))]
+
+
+def validation_views(train: Sequence[int], chosen: Sequence[int], test: Sequence[int], count: int) -> list[int]:
+    """Few-shot runs validate on training images they do not train on, so tuning never sees the test views:
+    ``count`` of the unused ones, evenly spaced (RegNeRF's rule); with every training image in use, the test views."""
+    in_use = set(chosen)
+    unused = [i for i in train if i not in in_use]
+    if not unused:
+        return list(test)
+    return [unused[j] for j in regnerf_views(len(unused), min(count, len(unused)))]
+
+
+def check_view_counts(num_views: int | None, val_views: int) -> None:
+    """The few-shot and validation view counts a parser takes (a clear error for impossible ones)."""
+    if num_views is not None and num_views < 1:
+        fail(f"--num-views must be >= 1, got {num_views}", "omit it to train on every training image")
+    if val_views < 1:
+        fail(f"--val-views must be >= 1, got {val_views}", "3 is the default")

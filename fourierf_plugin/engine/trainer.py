@@ -49,9 +49,7 @@ def drop_records_after(path: Path, step: int) -> None:
     os.replace(tmp, path)
 
 
-STOP_SIGNALS = tuple(
-    getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name)
-)
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 """Ctrl-C, and what a job scheduler, ``timeout``, a closed SSH session or a container stop sends."""
 
 

@@ -10,6 +10,7 @@ from collections.abc import Callable
 from typing import TypeVar
 
 from rich.console import Console
+from rich.markup import escape
 
 from fourierf_plugin.accel.allocator import keep_freed_memory
 from fourierf_plugin.utils.errors import UserError
@@ -35,9 +36,10 @@ def run_cli(main: Callable[[], T], argv: list[str] | None = None) -> T:
         if _verbose_requested(argv):
             traceback.print_exc()
         console = Console(stderr=True, highlight=False)
-        console.print(f"[bold red]error:[/bold red] {err.problem}", markup=True, soft_wrap=True)
+        # The message is text, not markup: "pip install '.[colmap]'" must print its brackets.
+        console.print(f"[bold red]error:[/bold red] {escape(err.problem)}", markup=True, soft_wrap=True)
         if err.fix:
-            console.print(f"[bold]fix:[/bold] {err.fix}", markup=True, soft_wrap=True)
+            console.print(f"[bold]fix:[/bold] {escape(err.fix)}", markup=True, soft_wrap=True)
         sys.exit(EXIT_USER_ERROR)
 
 

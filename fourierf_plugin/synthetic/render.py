@@ -62,6 +62,17 @@ def shade(spec: SceneSpec, hits: RayHits, directions: np.ndarray, shading: Shadi
     return rgb * (spec.ambient + (1.0 - spec.ambient) * lambert)[:, None]
 
 
+def render_rays(spec: SceneSpec, origins: np.ndarray, dirs: np.ndarray, shading: Shading = "none") -> np.ndarray:
+    """Premultiplied RGBA [N, 4] along rays [N, 3] (colour times hit, and the hit as alpha), in chunks."""
+    out = np.empty((len(dirs), 4))
+    for start in range(0, len(dirs), _CHUNK_RAYS):
+        sl = slice(start, start + _CHUNK_RAYS)
+        hits = intersect_scene(spec, origins[sl], dirs[sl])
+        out[sl, :3] = shade(spec, hits, dirs[sl], shading)
+        out[sl, 3] = hits.hit
+    return out
+
+
 def render_view(
     spec: SceneSpec,
     c2w: np.ndarray,
@@ -73,13 +84,7 @@ def render_view(
 ) -> np.ndarray:
     """Straight (not premultiplied) RGBA float [H, W, 4]: alpha is the hit fraction, colour the mean hit colour."""
     origins, dirs = pixel_rays(c2w, width, height, camera_angle_x, samples_per_pixel)
-    o, d = origins.reshape(-1, 3), dirs.reshape(-1, 3)
-    premult = np.empty((len(d), 4))
-    for start in range(0, len(d), _CHUNK_RAYS):
-        sl = slice(start, start + _CHUNK_RAYS)
-        hits = intersect_scene(spec, o[sl], d[sl])
-        premult[sl, :3] = shade(spec, hits, d[sl], shading)
-        premult[sl, 3] = hits.hit
+    premult = render_rays(spec, origins.reshape(-1, 3), dirs.reshape(-1, 3), shading)
     premult = premult.reshape(height, width, samples_per_pixel**2, 4).mean(axis=2)
     alpha = premult[..., 3:]
     rgb = np.divide(premult[..., :3], alpha, out=np.zeros_like(premult[..., :3]), where=alpha > 0)

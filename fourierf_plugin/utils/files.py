@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import json
 import os
 import tempfile
 from pathlib import Path
+from typing import Any
 
 from fourierf_plugin.utils.errors import fail
 
@@ -22,3 +24,17 @@ def check_writable_dir(folder: Path, flag: str) -> None:
         os.unlink(probe)
     except OSError as err:
         fail(f"cannot write to {folder} ({err.strerror or err})", f"choose a writable {flag}")
+
+
+def read_json_object(path: Path, fix: str, holds: str) -> dict[str, Any]:
+    """The JSON object in ``path``; a UserError naming the file (and line) when it is unreadable, not JSON, or not an
+    object (``holds`` says what the object should hold)."""
+    try:
+        content: Any = json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as err:
+        fail(f"{path} is not valid JSON: {err.msg} at line {err.lineno}, column {err.colno}", fix)
+    except (UnicodeDecodeError, OSError) as err:
+        fail(f"cannot read {path}: {err}", fix)
+    if not isinstance(content, dict):
+        fail(f"{path} must hold a JSON object with {holds}", fix)
+    return content

@@ -23,7 +23,7 @@ EFFECT_NAMES = ["background", "ray_space", "view_dependent", "occlusion_regulari
 def test_the_effects_config_covers_exactly_the_scene_effects() -> None:
     assert [f.name for f in dataclasses.fields(EffectsConfig)] == EFFECT_NAMES
     assert [f.name for f in dataclasses.fields(SceneEffects)] == EFFECT_NAMES
-    assert [f.name for f in dataclasses.fields(SceneDeclaration)] == [*EFFECT_NAMES, "bounded"]
+    assert [f.name for f in dataclasses.fields(SceneDeclaration)] == [*EFFECT_NAMES, "bounded", "reason"]
 
 
 @pytest.mark.parametrize("declared", [BLENDER_DECLARATION, LLFF_DECLARATION], ids=["blender", "llff"])

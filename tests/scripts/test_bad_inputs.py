@@ -31,6 +31,8 @@ from fourierf_plugin.scripts import export as export_script
 from fourierf_plugin.scripts import render as render_script
 from fourierf_plugin.scripts import train as train_script
 from fourierf_plugin.scripts.cli import EXIT_USER_ERROR, run_cli
+from tests.data.transforms_scenes import edit_transforms as edit_capture
+from tests.data.transforms_scenes import ring_c2w, write_image, write_scene
 from tests.helpers import REPO_ROOT, TINY_SCENE, tiny_args, train_tiny, venv_script
 from tests.scenes import write_llff_scene
 
@@ -154,6 +156,35 @@ def mixed_llff_sizes(tmp: Path) -> Path:
     scene = llff(tmp)
     iio.imwrite(scene / "images_8" / "image003.png", np.zeros((5, 7, 3), dtype=np.uint8))
     return scene
+
+
+NS = ("nerfstudio-data",)
+
+
+def capture(tmp: Path, damage: Callable[[Path], object]) -> Path:
+    """A small object capture (nerfstudio transforms.json, 8x6 images), then ``damage(root)``."""
+    root = write_scene(tmp / "capture", ring_c2w(10))
+    damage(root)
+    return root
+
+
+def set_keys(**keys: object) -> Callable[[Path], None]:
+    return lambda root: edit_capture(root, lambda doc: doc.update(keys))
+
+
+def frame_keys(index: int, **keys: object) -> Callable[[Path], None]:
+    return lambda root: edit_capture(root, lambda doc: doc["frames"][index].update(keys))
+
+
+def empty_colmap_model(tmp: Path) -> Path:
+    """A COLMAP text model whose images.txt lists nothing."""
+    model = tmp / "colmap_scene" / "colmap" / "sparse" / "0"
+    model.mkdir(parents=True)
+    write(model / "cameras.txt", "1 PINHOLE 8 6 6 6 4 3\n")
+    write(model / "images.txt", "# no images\n")
+    write(model / "points3D.txt", "")
+    (tmp / "colmap_scene" / "images").mkdir()
+    return tmp / "colmap_scene"
 
 
 # -- command lines --------------------------------------------------------------------------------------------------
@@ -417,6 +448,34 @@ CASES: dict[str, Case] = {
             ["marching-cubes", "--load-config", "{config}", "--output-path", "{tmp}/file.txt/m.ply"], extra=plain_file
         ),
         ("cannot write to", "file.txt", "--output-path"),
+    ),
+    # -- train: captures (nerfstudio transforms.json, COLMAP models) ------------------------------------------------
+    "train: transforms.json frame whose image is missing": Case(
+        "train",
+        lambda tmp, _: train_on(capture(tmp, lambda root: (root / "images" / "frame_00002.png").unlink()), tmp, *NS),
+        ("transforms.json, frame 2", "not found"),
+    ),
+    "train: unknown camera_model": Case(
+        "train",
+        lambda tmp, _: train_on(capture(tmp, set_keys(camera_model="EQUIRECTANGULAR")), tmp, *NS),
+        ("'EQUIRECTANGULAR'", "OPENCV_FISHEYE"),
+    ),
+    "train: non-finite pose in transforms.json": Case(
+        "train",
+        lambda tmp, _: train_on(capture(tmp, frame_keys(1, transform_matrix=[[float("nan")] * 4] * 4)), tmp, *NS),
+        ("transforms.json", "frame 1"),
+    ),
+    "train: mixed image sizes without per-frame intrinsics": Case(
+        "train",
+        lambda tmp, _: train_on(
+            capture(tmp, lambda root: write_image(root / "images" / "frame_00003.png", 3, 4, 3)), tmp, *NS
+        ),
+        ("frame_00003.png",),
+    ),
+    "train: a COLMAP model with no images": Case(
+        "train",
+        lambda tmp, _: train_on(empty_colmap_model(tmp), tmp, "colmap-data"),
+        ("colmap/sparse/0", "no registered images"),
     ),
 }
 

@@ -1,0 +1,236 @@
+"""From a capture's poses to a normalised scene, and the call between a forward-facing capture and an object.
+
+Forward-facing captures (every camera on one side, looking the same way) are normalised exactly as the LLFF parser
+does it, so a scene trains the same through ``poses_bounds.npy`` and through a ``transforms.json``: scaled so the
+nearest depth bound is 1 / bd_factor, recentred on the average pose, rays later mapped to NDC. Object (360°)
+captures are normalised as nerfstudio does: turned upright, centred where the cameras look, scaled so the cameras fit
+the unit box; the scene box comes from the sparse points when there are some.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from fourierf_plugin.data.capture import Capture, Intrinsics
+from fourierf_plugin.data.parsers.llff import NDC_BOX
+from fourierf_plugin.data.poses import Orientation, focus_point, orientation_rotation, recenter_poses
+from fourierf_plugin.utils.errors import fail
+
+SceneKind = Literal["object", "forward-facing"]
+
+VIEW_CONE_DEG = 50.0
+"""A forward-facing capture: every camera looks within this angle of the cameras' mean viewing direction."""
+SURROUND_DEG = 30.0
+"""Cameras surround the scene when, seen from its centre, one lies more than this from the cameras' mean direction
+(a capture spanning more than ~60° around it); LLFF rigs span a few degrees."""
+DEPTH_PERCENTILES = (0.1, 99.9)
+"""Near and far of a camera from the depths of the sparse points it sees (LLFF's imgs2poses)."""
+BOX_PERCENTILES = (1.0, 99.0)
+"""The object box holds the sparse points between these per-axis percentiles (stray points left out) ..."""
+BOX_PADDING = 0.05
+"""... padded by this share of its size on each side."""
+MIN_BOX_POINTS = 10
+"""Fewer sparse points than this say nothing about where the object is: the box then comes from the cameras."""
+OBJECT_NEAR = 0.05
+"""Near plane of an object scene, in its units (the cameras fit the unit box): rays never sample at the lens."""
+
+
+@dataclass(frozen=True)
+class KindDecision:
+    kind: SceneKind
+    reason: str
+
+
+@dataclass(frozen=True)
+class NormalisedScene:
+    """The poses the model sees and the region it models."""
+
+    camera_to_worlds: np.ndarray  # [N, 3, 4] float64, OpenGL, in capture frame order
+    scene_box: np.ndarray  # [2, 3] (min, max)
+    near: float
+    far: float
+    depth_bounds: tuple[float, float] | None  # metric (near, far) of the content of a forward-facing scene
+
+
+def camera_to_worlds(capture: Capture) -> np.ndarray:
+    """[N, 3, 4] float64 camera-to-worlds of the capture's frames, in order."""
+    return np.stack([np.asarray(f.camera_to_world, dtype=np.float64)[:3, :4] for f in capture.frames])
+
+
+def _intrinsics(capture: Capture) -> list[Intrinsics]:
+    return [f.intrinsics for f in capture.frames]
+
+
+def _finite_points(capture: Capture) -> np.ndarray:
+    points = np.asarray(capture.points, dtype=np.float64).reshape(-1, 3)
+    return points[np.isfinite(points).all(axis=1)]
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _angles_deg(directions: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    return np.degrees(np.arccos(np.clip(_unit(directions) @ _unit(axis), -1.0, 1.0)))
+
+
+def scene_centre(capture: Capture) -> np.ndarray | None:
+    """Where the content is: the sparse points' median; else the depth bounds' middle in front of the cameras; else
+    the cameras' focus; None when none of these is known (parallel optical axes and no points nor bounds)."""
+    points = _finite_points(capture)
+    if len(points):
+        return np.median(points, axis=0)
+    c2w = camera_to_worlds(capture)
+    bounds = [f.depth_bounds for f in capture.frames]
+    if all(b is not None for b in bounds):
+        depth = float(np.median([np.sqrt(near * far) for near, far in bounds]))  # type: ignore[misc]
+        view = _unit(-c2w[:, :, 2].sum(axis=0))
+        return c2w[:, :, 3].mean(axis=0) + depth * view
+    return focus_point(c2w)
+
+
+def decide_scene_kind(capture: Capture) -> KindDecision:
+    """Forward-facing when every camera looks within ``VIEW_CONE_DEG`` of the mean viewing direction and the cameras
+    do not surround the scene (``SURROUND_DEG``); an object (360°) capture otherwise."""
+    c2w = camera_to_worlds(capture)
+    views = _unit(-c2w[:, :, 2])
+    mean_view = views.sum(axis=0)
+    if np.linalg.norm(mean_view) < 1e-6 * len(views):
+        return KindDecision("object", "the cameras look in every direction: a capture around the scene")
+    angles = _angles_deg(views, mean_view)
+    worst = int(angles.argmax())
+    if angles[worst] > VIEW_CONE_DEG:
+        name = capture.frames[worst].image_path.name
+        return KindDecision(
+            "object",
+            f"camera {name} looks {angles[worst]:.0f}° away from the cameras' mean viewing direction (a forward-facing "
+            f"capture stays within {VIEW_CONE_DEG:.0f}°): a capture around the scene",
+        )
+    looks = f"every camera looks within {angles.max():.0f}° of the mean viewing direction"
+    centre = scene_centre(capture)
+    if centre is None:
+        return KindDecision("forward-facing", f"{looks} and their optical axes run nearly parallel")
+    sides = c2w[:, :, 3] - centre
+    sides = sides[np.linalg.norm(sides, axis=1) > 1e-12]
+    spread = float(_angles_deg(sides, _unit(sides).sum(axis=0)).max()) if len(sides) else 0.0
+    if spread > SURROUND_DEG:
+        return KindDecision(
+            "object",
+            f"{looks}, but seen from the scene's centre the cameras lie up to {spread:.0f}° apart from their mean "
+            f"direction (more than {SURROUND_DEG:.0f}°): they surround it",
+        )
+    return KindDecision(
+        "forward-facing", f"{looks}, and seen from the scene's centre all cameras lie within {spread:.0f}° of one side"
+    )
+
+
+def _depths_seen(capture: Capture, points: np.ndarray) -> list[np.ndarray]:
+    """Per frame, the depths of the points in front of the camera that project inside its image (distortion left
+    out: only percentiles are taken)."""
+    seen = []
+    for frame in capture.frames:
+        c2w = np.asarray(frame.camera_to_world, dtype=np.float64)[:3, :4]
+        local = (points - c2w[:, 3]) @ c2w[:, :3]  # camera coordinates, OpenGL: looking down -z
+        depth = -local[:, 2]
+        front = depth > 1e-9
+        k = frame.intrinsics
+        u = k.fx * local[front, 0] / depth[front] + k.cx
+        v = -k.fy * local[front, 1] / depth[front] + k.cy
+        inside = (u >= 0) & (u <= k.width) & (v >= 0) & (v <= k.height)
+        seen.append(depth[front][inside])
+    return seen
+
+
+def frame_depth_bounds(capture: Capture) -> np.ndarray:
+    """[N, 2] metric (near, far) per frame: as the file gives them, else from the sparse points each camera sees
+    (a camera that sees none takes the nearest and farthest of the others)."""
+    given = [f.depth_bounds for f in capture.frames]
+    if all(b is not None for b in given):
+        return np.asarray(given, dtype=np.float64)
+    points = _finite_points(capture)
+    if not len(points):
+        fail(
+            f"{capture.source}: a forward-facing scene needs the depth range the cameras see, and this capture has "
+            "neither depth_bounds on every frame nor sparse points",
+            "add a ply_file_path with the sparse points (fourierf-process-data writes it) or per-frame depth_bounds "
+            "[near, far], or pass --scene-kind object",
+        )
+    seen = _depths_seen(capture, points)
+    from_points = [np.percentile(d, DEPTH_PERCENTILES) if len(d) else None for d in seen]
+    known = [b for b in from_points if b is not None]
+    if not known:
+        fail(
+            f"{capture.source}: no sparse point lies in front of any camera, so the scene's depth range is unknown",
+            "check that the points and the poses share one world frame, or pass --scene-kind object",
+        )
+    fallback = (min(b[0] for b in known), max(b[1] for b in known))
+    rows = [g if g is not None else (p if p is not None else fallback) for g, p in zip(given, from_points, strict=True)]
+    bounds = np.asarray(rows, dtype=np.float64)
+    if not ((bounds > 0).all() and (bounds[:, 0] < bounds[:, 1]).all()):
+        fail(
+            f"{capture.source}: the points give a camera an empty depth range (near >= far)",
+            "add per-frame depth_bounds [near, far], or pass --scene-kind object",
+        )
+    return bounds
+
+
+def normalise_forward_facing(capture: Capture, bd_factor: float) -> NormalisedScene:
+    """LLFF's normalisation: the nearest depth bound becomes 1 / bd_factor, the average pose the identity; the box
+    and near/far are NDC's."""
+    c2w = camera_to_worlds(capture)
+    bounds = frame_depth_bounds(capture)
+    scale = 1.0 / (bounds.min() * bd_factor)
+    c2w[:, :, 3] *= scale
+    bounds = bounds * scale
+    return NormalisedScene(
+        recenter_poses(c2w), np.asarray(NDC_BOX, dtype=np.float64), 0.0, 1.0, (float(bounds.min()), float(bounds.max()))
+    )
+
+
+def _box_from_points(points: np.ndarray) -> np.ndarray:
+    low, high = np.percentile(points, BOX_PERCENTILES, axis=0)
+    size = high - low
+    size = np.maximum(size, 0.1 * size.max())  # a flat cloud (a wall, a poster) still gets some depth
+    middle = (low + high) / 2
+    half = size * (0.5 + BOX_PADDING)
+    return np.stack([middle - half, middle + half])
+
+
+def _box_from_views(c2w: np.ndarray, capture: Capture) -> np.ndarray:
+    """A cube about the focus (the origin) that the cameras see whole: half-size distance x tan(half the narrower
+    field of view), the largest over cameras. Blender's lego rig (distance 4, 40° field) gives its 1.5 box."""
+    tan_half_fov = np.array([min(k.width / (2 * k.fx), k.height / (2 * k.fy)) for k in _intrinsics(capture)])
+    half = float((np.linalg.norm(c2w[:, :, 3], axis=1) * tan_half_fov).max())
+    return np.array([[-half] * 3, [half] * 3])
+
+
+def normalise_object(capture: Capture, orientation: Orientation, scene_scale: float) -> NormalisedScene:
+    """nerfstudio-like: turned upright (``orientation``), centred on the cameras' focus (their mean centre when the
+    axes do not converge), scaled so the cameras fit [-1, 1]^3. The box holds the sparse points (robust percentiles,
+    padded); without points, what the converging cameras see whole, else the cameras' cube; ``scene_scale`` then
+    grows or shrinks it about its centre."""
+    c2w = camera_to_worlds(capture)
+    rotation = orientation_rotation(c2w, orientation)
+    c2w = np.concatenate([rotation @ c2w[:, :, :3], (c2w[:, :, 3] @ rotation.T)[:, :, None]], axis=2)
+    points = _finite_points(capture) @ rotation.T
+    focus = focus_point(c2w)
+    centre = focus if focus is not None else c2w[:, :, 3].mean(axis=0)
+    c2w[:, :, 3] -= centre
+    extent = float(np.abs(c2w[:, :, 3]).max())
+    scale = 1.0 / extent if extent > 1e-12 else 1.0
+    c2w[:, :, 3] *= scale
+    points = (points - centre) * scale
+    if len(points) >= MIN_BOX_POINTS:
+        box = _box_from_points(points)
+    elif focus is not None:
+        box = _box_from_views(c2w, capture)
+    else:
+        box = np.array([[-1.0] * 3, [1.0] * 3])
+    middle = box.mean(axis=0)
+    box = middle + (box - middle) * scene_scale
+    corners = np.stack(np.meshgrid(*box.T, indexing="ij"), axis=-1).reshape(-1, 3)
+    far = float(np.linalg.norm(corners[None] - c2w[:, None, :, 3], axis=-1).max())
+    return NormalisedScene(c2w, box, OBJECT_NEAR, max(far, 2 * OBJECT_NEAR), None)

@@ -30,7 +30,7 @@ from fourierf_plugin.method_configs import config_registry
 from fourierf_plugin.utils.console import write_json
 from fourierf_plugin.utils.lpips import LPIPS, default_lpips_weights
 
-SceneKind = Literal["blender", "llff"]
+SceneKind = Literal["blender", "llff", "nerfstudio", "colmap"]
 
 
 @dataclass(frozen=True)

@@ -36,10 +36,11 @@ from fourierf_plugin.utils.lpips import default_lpips_weights
 @dataclass
 class BenchConfig:
     data: Path
-    """Scene folder (a Blender scene with transforms_*.json, or an LLFF scene with poses_bounds.npy)."""
+    """Scene folder: Blender (transforms_*.json), LLFF (poses_bounds.npy), a nerfstudio capture (transforms.json) or
+    a COLMAP model (colmap/sparse/0, sparse/0)."""
     methods: tuple[str, ...] = ("fourierf-vm", "tensorf-vm")
     """Methods to train (fourierf-vm, fourierf-cp, tensorf-vm, tensorf-cp, ...)."""
-    scene_kind: Literal["auto", "blender", "llff"] = "auto"
+    scene_kind: Literal["auto", "blender", "llff", "nerfstudio", "colmap"] = "auto"
     """Which parser reads --data (auto: from the files it holds)."""
     views: int | None = None
     """Few-shot: train on this many views chosen by the parser."""
@@ -107,13 +108,22 @@ def detect_scene(cfg: BenchConfig) -> Scene:
     data = cfg.data.expanduser().resolve()
     if not data.is_dir():
         fail(f"--data {cfg.data} is not a folder", "pass the scene folder (e.g. --data demo/lego_tiny)")
-    markers: dict[SceneKind, str] = {"blender": "transforms_train.json", "llff": "poses_bounds.npy"}
-    present = [k for k, name in markers.items() if (data / name).is_file()]
+    markers: dict[SceneKind, tuple[str, ...]] = {
+        "blender": ("transforms_train.json",),
+        "llff": ("poses_bounds.npy",),
+        "nerfstudio": ("transforms.json",),
+        "colmap": ("colmap/sparse/0", "sparse/0", "sparse"),
+    }
+    present = [k for k, names in markers.items() if any((data / name).exists() for name in names)]
     kind = cfg.scene_kind if cfg.scene_kind != "auto" else (present[0] if present else None)
     if kind is None:
-        fail(f"--data {cfg.data} holds neither transforms_train.json nor poses_bounds.npy", "pass a scene folder")
+        fail(
+            f"--data {cfg.data} holds none of transforms_train.json, poses_bounds.npy, transforms.json or a COLMAP "
+            "model (sparse/0)",
+            "pass a scene folder (fourierf-process-data makes one from a folder of photos)",
+        )
     if kind not in present:
-        fail(f"--scene-kind {kind} needs {markers[kind]} in {cfg.data}, which is missing", "check --data")
+        fail(f"--scene-kind {kind} needs {' or '.join(markers[kind])} in {cfg.data}, which is missing", "check --data")
     if cfg.test_every < 1:
         fail(f"--test-every {cfg.test_every} is not valid", "pass 1 (every test view) or more")
     args: list[str] = []

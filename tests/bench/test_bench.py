@@ -15,6 +15,7 @@ from fourierf_plugin.bench import report, results
 from fourierf_plugin.bench.executors import LocalExecutor, RayExecutor, probe, threads_per_worker
 from fourierf_plugin.bench.runner import RunTask, Scene, train_command
 from fourierf_plugin.bench.sweep import RunSpec, SweepSpec, designate_profiled, eval_steps, expand
+from fourierf_plugin.scripts.bench import BenchConfig, detect_scene
 from fourierf_plugin.scripts.bench import main as bench_main
 from fourierf_plugin.scripts.cli import run_cli
 from fourierf_plugin.utils.errors import UserError
@@ -299,3 +300,21 @@ def test_run_spec_key_is_path_safe() -> None:
     run = RunSpec("fourierf-vm", 800, None, 2_000_000, 64**3, 0.5, 1024, 0.3, 0.2, 1, 10)
     assert run.key == "fourierf-vm_it800_dsdef_g2000000v_sr0.5_b1024_f00.3_r0.2_s1"
     assert run.delta_per_iteration() == pytest.approx(0.7 / 160)
+
+
+def test_captures_are_detected_and_read_by_their_parser(tmp_path: Path) -> None:
+    """A nerfstudio capture (transforms.json) goes to nerfstudio-data, a bare COLMAP model to colmap-data, and a
+    process-data output (both) to nerfstudio-data."""
+    nerfstudio = tmp_path / "ns"
+    nerfstudio.mkdir()
+    (nerfstudio / "transforms.json").write_text("{}")
+    colmap = tmp_path / "colmap"
+    (colmap / "sparse" / "0").mkdir(parents=True)
+    both = tmp_path / "both"
+    (both / "colmap" / "sparse" / "0").mkdir(parents=True)
+    (both / "transforms.json").write_text("{}")
+    for data, parser in ((nerfstudio, "nerfstudio-data"), (colmap, "colmap-data"), (both, "nerfstudio-data")):
+        scene = detect_scene(BenchConfig(data=data, views=3))
+        assert scene.parser_command == parser and scene.parser_args == ("--num-views", "3"), data
+    with pytest.raises(UserError, match=r"transforms\.json"):
+        detect_scene(BenchConfig(data=colmap, scene_kind="nerfstudio"))

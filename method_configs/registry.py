@@ -18,6 +18,7 @@ from fourierf_plugin.method_configs.presets import (
     fourierf_vm_code,
     tensorf_cp,
     tensorf_vm,
+    zerorf_vm,
 )
 
 all_methods: dict[str, TrainerConfig] = {
@@ -26,6 +27,7 @@ all_methods: dict[str, TrainerConfig] = {
     "fourierf-vm-code": fourierf_vm_code,
     "tensorf-vm": tensorf_vm,
     "tensorf-cp": tensorf_cp,
+    "zerorf-vm": zerorf_vm,
 }
 all_descriptions: dict[str, str] = dict(descriptions)
 

@@ -63,6 +63,8 @@ class RunTask:
     device: str = "auto"
     lpips_weights: Path | None = None
     keep_checkpoints: bool = False
+    train_args: tuple[str, ...] = ()
+    """fourierf-train flags for this run beyond the knobs (the same for every run of a bench)."""
 
     @property
     def runs_dir(self) -> Path:
@@ -93,7 +95,7 @@ def train_command(task: RunTask) -> list[str]:
         cmd += ["--threads", str(task.threads)]
     if spec.profile_phases:
         cmd += ["--profile-phases", "True"]
-    return cmd + task.scene.parser_flags(spec.downscale)
+    return cmd + list(task.train_args) + task.scene.parser_flags(spec.downscale)
 
 
 def run_timed(cmd: list[str], log: Path, env: dict[str, str] | None = None) -> tuple[float, float, int]:

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from fourierf_plugin.field_components.generator import invalid_options
 from fourierf_plugin.field_components.schedules import steps_from_fractions
 from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.utils.memory import available_memory, check_fits
@@ -79,6 +80,7 @@ RULES: tuple[Rule, ...] = (
     Rule(f"{_MODEL}.l1_weight_initial", at_least(0.0), "a weight >= 0", "8e-5"),
     Rule(f"{_MODEL}.l1_weight_rest", at_least(0.0), "a weight >= 0", "4e-5"),
     Rule(f"{_MODEL}.occlusion_weight", at_least(0.0), "a weight >= 0", "0.01"),
+    Rule(f"{_MODEL}.cull_weight_threshold", within(0.0, 1.0), "a weight in [0, 1] (0 = off)", "1e-4"),
     Rule(f"{_MODEL}.occlusion_fraction", within(1e-9, 1.0), "a fraction of the ray in (0, 1]", "0.15625"),
     Rule(f"{_ACCEL}.render_chunk_rays", int_at_least(1), "an integer >= 1", "2048"),
     Rule(f"{_ACCEL}.early_stop_transmittance", within(0.0, 0.5), "a transmittance in [0, 0.5]", "1e-4"),
@@ -96,6 +98,8 @@ RULES: tuple[Rule, ...] = (
     Rule(f"{_MODEL}.field.init_scale", optional(positive), "a standard deviation > 0 (or omitted)", "0.1"),
     Rule("optimizer.lr_grids", positive, "a learning rate > 0", "0.02"),
     Rule("optimizer.lr_networks", positive, "a learning rate > 0", "1e-3"),
+    Rule("optimizer.lr_generator", positive, "a learning rate > 0", "2e-3"),
+    Rule("optimizer.generator_grad_clip", at_least(0.0), "a gradient norm >= 0 (0 = never clip)", "0.32"),
     Rule("optimizer.betas", each(within(0.0, 1.0 - 1e-12)), "two numbers in [0, 1)", "0.9 0.98"),
     Rule("optimizer.weight_decay", at_least(0.0), "a number >= 0", "0.2"),
     Rule("optimizer.lr_decay_ratio", positive, "a ratio > 0 (1 = no decay)", "0.1"),
@@ -117,6 +121,30 @@ def _show(value: Any) -> str:
     return " ".join(map(str, value)) if isinstance(value, (tuple, list)) else str(value)
 
 
+ZERORF_EXAMPLES = {
+    "noise_channels": "8",
+    "feature_channels": "16",
+    "decoder_width": "64",
+    "noise_resolution": "0",
+    "plane_channels": "256 128 64 64 32",
+    "line_channels": "128 128 128 64 32 32",
+}
+"""ZeroRF's own values, the example each message gives."""
+
+
+def check_zerorf_options(config: Any) -> None:
+    """A UserError for the first ZeroRF generator option it cannot be built with (only when the field uses it)."""
+    zerorf = config.pipeline.model.field.zerorf
+    if not zerorf.enabled:
+        return
+    for name, needs in invalid_options(zerorf):
+        flag = flag_of(f"{_MODEL}.field.zerorf.{name}")
+        fail(
+            f"{flag} {_show(getattr(zerorf, name))} is out of range: it must be {needs}",
+            f"pass e.g. {flag} {ZERORF_EXAMPLES[name]} (ZeroRF's value)",
+        )
+
+
 EVENT_SCHEDULES = (f"{_MODEL}.field.upsample_fractions", f"{_MODEL}.occupancy_update_fractions")
 """Events placed at fractions of the run: each must land on a step inside it."""
 
@@ -128,6 +156,7 @@ def check_training_options(config: Any) -> None:
         if not rule.ok(value):
             flag = flag_of(rule.path)
             fail(f"{flag} {_show(value)} is out of range: it must be {rule.needs}", f"pass e.g. {flag} {rule.example}")
+    check_zerorf_options(config)
     iters = config.max_num_iterations
     if not (_integer(iters) and iters >= 1):
         fail(f"--max-num-iterations must be at least 1, got {iters}", "pass a positive number")

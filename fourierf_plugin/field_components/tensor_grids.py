@@ -129,10 +129,16 @@ class TensorVM(TensorGrid):
     def features(
         self, planes: Sequence[Any], lines: Sequence[Any], xyz: Tensor, lookup: FactorLookup = GRID_SAMPLE
     ) -> list[Tensor]:
-        return [
-            lookup.plane(p, xyz[:, m0], xyz[:, m1]) * lookup.line(line, xyz[:, v])
-            for p, line, (m0, m1), v in zip(planes, lines, MAT_MODES, VEC_MODES, strict=True)
-        ]
+        return vm_features(planes, lines, xyz, lookup)
+
+
+def vm_features(planes: Sequence[Any], lines: Sequence[Any], xyz: Tensor, lookup: FactorLookup = GRID_SAMPLE) -> list:
+    """Per-component features [N, C] of each plane × line group at normalised points: ``P_i(x_m0, x_m1) · L_i(x_v)``
+    (free VM factors and generated ones are read alike)."""
+    return [
+        lookup.plane(p, xyz[:, m0], xyz[:, m1]) * lookup.line(line, xyz[:, v])
+        for p, line, (m0, m1), v in zip(planes, lines, MAT_MODES, VEC_MODES, strict=True)
+    ]
 
 
 class TensorCP(TensorGrid):

@@ -1,18 +1,18 @@
 """The FourieRF field: TensoRF density and appearance grids, read through their Fourier-filtered copies.
 
-``prepare(f_density, f_color)`` low-passes every factor once (with autograd when training) and keeps the result;
-every lookup and regulariser until the next ``prepare`` reads it. Any resize invalidates it, so a stale grid of the
-old shape can never be read. ``filtered_at`` evaluates the field at other cutoffs for a while (an export, a viewer)
-and then restores what was prepared.
+``prepare(f_density, f_color)`` (``PreparedField``) low-passes every factor once (with autograd when training) and
+keeps the result; every lookup and regulariser until the next ``prepare`` reads it. How factors are filtered and read
+is the ``GridOps`` the field is given (``fields.grid_ops``): the reference one is the method as written; an
+accelerated one computes the same numbers faster.
 
-How factors are filtered and read is the ``GridOps`` the field is given (``fields.grid_ops``): the reference one is
-the method as written; an accelerated one computes the same numbers faster.
+``FieldConfig`` describes every field of the package: with ``zerorf.enabled`` the model builds the ZeroRF field
+(``fields.zerorf_field``) from it instead.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
+import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -21,8 +21,12 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from fourierf_plugin.field_components.decoder import AppearanceDecoder
+from fourierf_plugin.field_components.generator import ZeroRFConfig
 from fourierf_plugin.field_components.tensor_grids import TensorCP, TensorGrid, TensorVM
 from fourierf_plugin.fields.grid_ops import FilteredFactors, GridOps
+from fourierf_plugin.fields.prepared_field import FilteredGrids, PreparedField
+
+__all__ = ["FieldConfig", "FilteredGrids", "FourierTensoRFField"]
 
 
 @dataclass
@@ -51,18 +55,11 @@ class FieldConfig:
     """Voxel budget after the last upsample."""
     upsample_fractions: tuple[float, ...] = (0.3, 0.7)
     """When to upsample, as fractions of the run (log-spaced voxel counts)."""
+    zerorf: ZeroRFConfig = dataclasses.field(default_factory=ZeroRFConfig)
+    """ZeroRF: the VM factors generated from fixed noise by convolutional networks, and ZeroRF's decoder (zerorf-vm)."""
 
 
-@dataclass
-class FilteredGrids:
-    """Both grids after the low-pass at one pair of cutoffs."""
-
-    density: FilteredFactors
-    appearance: FilteredFactors
-    cutoffs: tuple[float, float]
-
-
-class FourierTensoRFField(nn.Module):
+class FourierTensoRFField(PreparedField):
     def __init__(
         self,
         config: FieldConfig,
@@ -74,9 +71,8 @@ class FourierTensoRFField(nn.Module):
         plane_leakage: float = 0.0,
         app_planes_follow_density: bool = False,
     ) -> None:
-        super().__init__()
+        super().__init__(aabb, ops)
         self.config = config
-        self.ops = ops if ops is not None else GridOps()
         self.plane_leakage = float(plane_leakage)
         self.app_planes_follow_density = app_planes_follow_density
         grid_cls = TensorVM if config.decomposition == "vm" else TensorCP
@@ -86,9 +82,6 @@ class FourierTensoRFField(nn.Module):
         app_in = sum(config.appearance_components) if config.decomposition == "vm" else config.appearance_components[0]
         self.basis = nn.Linear(app_in, config.appearance_dim, bias=False)
         self.decoder = AppearanceDecoder(config.appearance_dim, config.hidden_dim, view_dependent)
-        self.register_buffer("aabb", aabb.detach().clone().float())
-        self._filtered: FilteredGrids | None = None
-        self._render_key: tuple | None = None
 
     # -- filtering --------------------------------------------------------------------------------------------
     def filter(self, f_density: float, f_color: float) -> FilteredGrids:
@@ -107,56 +100,10 @@ class FourierTensoRFField(nn.Module):
             (f_density, f_color),
         )
 
-    def prepare(self, f_density: float, f_color: float) -> None:
-        """Filter once for this iteration (or this render) and keep the result for every lookup.
-
-        Without gradients (renders), a second call with the same cutoffs and unchanged parameters keeps what the
-        first one made, so the views of one render share the filtering and any tables built from it.
-        """
-        key = (f_density, f_color, self._parameter_versions()) if not torch.is_grad_enabled() else None
-        if key is not None and self._filtered is not None and self._render_key == key:
-            return
-        self._filtered = self.filter(f_density, f_color)
-        self._render_key = key
-
-    @contextmanager
-    def filtered_at(self, f_density: float, f_color: float) -> Iterator[FilteredGrids]:
-        """Evaluate the field at these cutoffs inside the block, then restore the previous filtering. The filtering is
-        made without gradients (lookups in the block are as the caller's grad mode says).
-
-        Why restore: the trainer may export between iterations, and its prepared (autograd) filtering must not
-        silently become this one.
-        """
-        previous, previous_key = self._filtered, self._render_key
-        try:
-            with torch.no_grad():
-                self.prepare(f_density, f_color)
-            yield self.filtered
-        finally:
-            self._filtered, self._render_key = previous, previous_key
-
-    def _parameter_versions(self) -> tuple:
-        """Identity and in-place version of every parameter and buffer: any optimiser step or resize changes it."""
-        return tuple((id(t), t._version) for t in (*self.parameters(), *self.buffers()))
-
-    def invalidate(self) -> None:
-        self._filtered = None
-        self._render_key = None
-
-    @property
-    def filtered(self) -> FilteredGrids:
-        if self._filtered is None:
-            raise RuntimeError("field.prepare(...) must run before lookups (and after every resize)")
-        return self._filtered
-
     # -- geometry ---------------------------------------------------------------------------------------------
     @property
     def resolution(self) -> list[int]:
         return self.density_grid.resolution
-
-    def normalize(self, xyz: Tensor) -> Tensor:
-        """World points to the grid's [-1, 1]³ (align_corners=True: the box corners are grid vertices)."""
-        return (xyz - self.aabb[0]) * (2.0 / (self.aabb[1] - self.aabb[0])) - 1.0
 
     # -- queries ----------------------------------------------------------------------------------------------
     def density(self, xyz: Tensor) -> Tensor:
@@ -171,3 +118,20 @@ class FourierTensoRFField(nn.Module):
         return self.ops.appearance(
             self.appearance_grid, self.filtered.appearance, self.basis, self.decoder, self.normalize(xyz), directions
         )
+
+    # -- structure and parameters ----------------------------------------------------------------------------------
+    def crop(self, lo: Sequence[int], hi: Sequence[int], box: Tensor) -> None:
+        """Crop the raw factors to vertices [lo, hi) per axis, which span ``box`` (the occupancy shrink)."""
+        for grid in (self.density_grid, self.appearance_grid):
+            grid.replace(*grid.cropped(lo, hi))
+        self.aabb = box
+
+    def upsample(self, reso: Sequence[int]) -> None:
+        """Replace each raw factor by the bilinear upsample of its *filtered* version (out-of-band is dropped)."""
+        g = self.filtered
+        for grid, factors in ((self.density_grid, g.density), (self.appearance_grid, g.appearance)):
+            grid.replace(*grid.upsampled(factors.planes, factors.lines, list(reso)))
+
+    def param_groups(self) -> dict[str, list[nn.Parameter]]:
+        grids = list(self.density_grid.parameters()) + list(self.appearance_grid.parameters())
+        return {"grids": grids, "networks": list(self.basis.parameters()) + list(self.decoder.parameters())}

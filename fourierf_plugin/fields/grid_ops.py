@@ -16,7 +16,7 @@ from torch import Tensor, nn
 
 from fourierf_plugin.field_components import fourier
 from fourierf_plugin.field_components.decoder import AppearanceDecoder
-from fourierf_plugin.field_components.tensor_grids import TensorGrid
+from fourierf_plugin.field_components.tensor_grids import GRID_SAMPLE, FactorLookup, TensorGrid
 from fourierf_plugin.model_components import losses
 
 
@@ -36,6 +36,8 @@ class GridOps:
     """The reference operations on factor grids."""
 
     name = "reference"
+    lookup: FactorLookup = GRID_SAMPLE
+    """How ``features`` reads a factor at a point (an accelerated form sets its own)."""
 
     def filter_lines(self, lines: Tensor, f: float) -> Tensor:
         """Low-pass [..., L] lines at cutoff ``f`` (``fourier.filter_lines``)."""
@@ -44,6 +46,11 @@ class GridOps:
     def filter_planes(self, planes: Tensor, f: float, leakage: float) -> Tensor:
         """Low-pass [..., H, W] planes at cutoff ``f`` (``fourier.filter_planes``)."""
         return fourier.filter_planes(planes, f, leakage)
+
+    def features(self, grid: Any, factors: FilteredFactors, xyz: Tensor) -> list[Tensor]:
+        """Every component's feature [N, C_i], per factor group of ``grid``, at normalised points (what a decoder that
+        reads the components themselves takes, e.g. ZeroRF's)."""
+        return grid.features(factors.planes, factors.lines, xyz, self.lookup)
 
     def summed_features(self, grid: TensorGrid, factors: FilteredFactors, xyz: Tensor) -> Tensor:
         """The sum of every component of ``grid`` at normalised points [N, 3] -> [N] (the density feature)."""

@@ -15,7 +15,7 @@ from torch import Tensor
 from fourierf_plugin.model_components.gradient_scaling import scale_gradient
 from fourierf_plugin.model_components.occupancy import OccupancyGrid
 from fourierf_plugin.model_components.ray_sampling import RaySamples
-from fourierf_plugin.model_components.rendering import accumulate
+from fourierf_plugin.model_components.rendering import accumulate, composite_weights
 from fourierf_plugin.utils.phases import phase
 
 DensityFn = Callable[[Tensor], Tensor]
@@ -43,6 +43,26 @@ def densities(density: DensityFn, samples: RaySamples, occupancy: OccupancyGrid)
     if index.numel():
         sigma = sigma.index_put((index,), density(selected))
     return sigma.view(num_rays, num_samples)
+
+
+def densities_that_show(
+    density: DensityFn, samples: RaySamples, occupancy: OccupancyGrid, distance_scale: float, weight_threshold: float
+) -> Tensor:
+    """σ [R, N] with gradients only where it shows: ``densities`` read once without gradients, then again with them at
+    the samples whose compositing weight exceeds ``weight_threshold``; every other sample counts as empty.
+
+    ZeroRF's occlusion culling (its renderer's ``occlusion_culling_th``, 1e-4): samples in empty space or behind an
+    opaque surface change the image by less than the threshold, and a field with an expensive density (a decoder MLP
+    per sample) skips its backward there.
+    """
+    with torch.no_grad():
+        weights = composite_weights(densities(density, samples, occupancy), samples.deltas, distance_scale)
+    index = (weights > weight_threshold).view(-1).nonzero().squeeze(1)
+    points = samples.points.view(-1, 3)
+    sigma = points.new_zeros(points.shape[0])
+    if index.numel():
+        sigma = sigma.index_put((index,), density(points.index_select(0, index)))
+    return sigma.view(samples.shape)
 
 
 def densities_everywhere(density: DensityFn, samples: RaySamples, occupancy: OccupancyGrid) -> Tensor:

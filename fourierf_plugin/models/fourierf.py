@@ -20,11 +20,14 @@ from fourierf_plugin.configs.base import InstantiateConfig
 from fourierf_plugin.data.scene_effects import SceneEffects
 from fourierf_plugin.field_components import schedules
 from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig, FourierTensoRFField
+from fourierf_plugin.fields.prepared_field import PreparedField
+from fourierf_plugin.fields.zerorf_field import ZeroRFField
 from fourierf_plugin.model_components import losses
 from fourierf_plugin.model_components.gradient_scaling import floaters_scale, scale_gradient
 from fourierf_plugin.model_components.marching import (
     densities,
     densities_everywhere,
+    densities_that_show,
     densities_until_opaque,
     shade,
 )
@@ -115,18 +118,31 @@ class FourieRFModel(nn.Module):
         self.upsample_steps = schedules.steps_from_fractions(fc.upsample_fractions, max_iters)
         self.voxel_targets = schedules.voxel_counts(fc.n_voxels_init, fc.n_voxels_final, len(self.upsample_steps))
         self.occupancy_steps = schedules.steps_from_fractions(config.occupancy_update_fractions, max_iters)
-        reso = schedules.n_to_reso(fc.n_voxels_init, (scene_box[1] - scene_box[0]).tolist())
-        self.field = FourierTensoRFField(
+        self.field = self._build_field(scene_box, effects, generator, device)
+        self.occupancy = OccupancyGrid()
+
+    def _build_field(
+        self, scene_box: Tensor, effects: SceneEffects, generator: torch.Generator, device: torch.device | str
+    ) -> PreparedField:
+        """The FourieRF/TensoRF field of free factors, or the ZeroRF field of generated ones (``field.zerorf``)."""
+        config, fc = self.config, self.config.field
+        size = (scene_box[1] - scene_box[0]).tolist()
+        reso = schedules.n_to_reso(fc.n_voxels_init, size)
+        ops = build_ops(config.accel, device)
+        if fc.zerorf.enabled:
+            final = schedules.n_to_reso(max([fc.n_voxels_init, *self.voxel_targets]), size)
+            leakage = config.fourier.plane_leakage
+            return ZeroRFField(fc, scene_box, reso, final, effects.view_dependent, generator, ops, leakage)
+        return FourierTensoRFField(
             fc,
             scene_box,
             reso,
             effects.view_dependent,
             generator,
-            ops=build_ops(config.accel, device),
+            ops=ops,
             plane_leakage=config.fourier.plane_leakage,
             app_planes_follow_density=config.fourier.app_planes_follow_density,
         )
-        self.occupancy = OccupancyGrid()
 
     # -- schedules (pure functions of the step) ---------------------------------------------------------------
     def cutoffs(self, step: int) -> tuple[float, float]:
@@ -137,7 +153,10 @@ class FourieRFModel(nn.Module):
         return schedules.cutoff_at(step, fc.f0_density, ramp), schedules.cutoff_at(step, fc.f0_color, ramp)
 
     def reset_steps(self) -> list[int]:
-        """Steps after which parameters are replaced (and the optimiser restarts at the initial lr)."""
+        """Steps after which parameters are replaced (and the optimiser restarts at the initial lr); none for a field
+        whose resizes keep its parameters (ZeroRF's generators)."""
+        if not self.field.replaces_parameters:
+            return []
         return sorted(set(self.upsample_steps) | set(self.occupancy_steps))
 
     def l1_weight(self, step: int) -> float:
@@ -217,6 +236,9 @@ class FourieRFModel(nn.Module):
     def march(self, samples: RaySamples) -> Tensor:
         """σ [R, N] at the samples in occupied cells; renders may stop each ray once it is opaque."""
         accel = self.config.accel
+        cull = self.config.cull_weight_threshold
+        if self.training and cull > 0 and not self.gpu_paths:  # the GPU paths keep data-independent shapes
+            return densities_that_show(self.field.density, samples, self.occupancy, self.config.distance_scale, cull)
         if self.training and self.gpu_paths:
             return densities_everywhere(self.field.density, samples, self.occupancy)
         if self.training or accel.early_stop_transmittance <= 0:
@@ -272,11 +294,12 @@ class FourieRFModel(nn.Module):
     def after_step(self, step: int) -> Changes:
         """Occupancy updates (the first shrinks the box, the second asks for ray filtering) and upsamples."""
         changes = Changes()
+        structure_changed = False
         if step in self.occupancy_steps:
             self.prepare(step + 1)
             first = step == self.occupancy_steps[0]
             self._update_occupancy(shrink=first)
-            changes.params_replaced = True
+            structure_changed = True
             # Ray filtering needs metric rays through a box; NDC rays all cross the frustum (TensoRF skips it too).
             second = len(self.occupancy_steps) > 1 and step == self.occupancy_steps[1]
             changes.filter_rays = second and self.effects.ray_space == "euclidean"
@@ -284,8 +307,9 @@ class FourieRFModel(nn.Module):
             self.prepare(step + 1)
             target = self.voxel_targets[self.upsample_steps.index(step)]
             self._upsample(schedules.n_to_reso(target, self._box_size()))
-            changes.params_replaced = True
-        if changes.params_replaced:
+            structure_changed = True
+        if structure_changed:
+            changes.params_replaced = self.field.replaces_parameters
             self.field.invalidate()
         return changes
 
@@ -314,16 +338,11 @@ class FourieRFModel(nn.Module):
             return
         self.occupancy.set(vertices, self.aabb)
         if shrink:
-            lo, hi, new_box = shrink_bounds(box, self.aabb, reso)
-            for grid in (self.field.density_grid, self.field.appearance_grid):
-                grid.replace(*grid.cropped(lo, hi))
-            self.field.aabb = new_box
+            self.field.crop(*shrink_bounds(box, self.aabb, reso))
 
     def _upsample(self, reso: list[int]) -> None:
-        """Replace each raw factor by the bilinear upsample of its *filtered* version (out-of-band is dropped)."""
-        g = self.field.filtered
-        for grid, factors in ((self.field.density_grid, g.density), (self.field.appearance_grid, g.appearance)):
-            grid.replace(*grid.upsampled(factors.planes, factors.lines, reso))
+        """Resize the field to ``reso`` vertices per axis (after ``prepare``: free grids upsample what it filtered)."""
+        self.field.upsample(reso)
 
     @torch.no_grad()
     def rays_hit_occupancy(
@@ -343,9 +362,8 @@ class FourieRFModel(nn.Module):
 
     # -- parameters and checkpoints -----------------------------------------------------------------------------
     def param_groups(self) -> dict[str, list[nn.Parameter]]:
-        grids = list(self.field.density_grid.parameters()) + list(self.field.appearance_grid.parameters())
-        networks = list(self.field.basis.parameters()) + list(self.field.decoder.parameters())
-        return {"grids": grids, "networks": networks}
+        """The field's parameters by optimiser group (``engine.optimizers`` gives each group its learning rate)."""
+        return self.field.param_groups()
 
     def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):  # type: ignore[override]
         """Load a checkpoint taken after any number of upsamples/shrinks: tensors are resized to the saved shapes."""
@@ -392,3 +410,6 @@ class FourieRFModelConfig(InstantiateConfig):
     """Share of each ray, from its start, whose densities the occlusion term penalises (FreeNeRF: 20 of 128)."""
     floaters_gradient_scaling: bool = False
     """'Floaters No More': scale density and colour gradients by clamp(t², 0, 1) (t: the ray parameter)."""
+    cull_weight_threshold: float = 0.0
+    """Training on a CPU: σ is read without gradients first, then with them only where the compositing weight exceeds
+    this; other samples count as empty (ZeroRF's occlusion culling: 1e-4). 0 = off."""

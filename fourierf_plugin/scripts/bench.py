@@ -50,6 +50,9 @@ class BenchConfig:
     """Blender: evaluate every k-th test view (8 gives 25 of lego's 200); LLFF holds out every 8th image itself."""
     parser_args: tuple[str, ...] = ()
     """More parser flags, passed as they are (e.g. --parser-args --near 2.5)."""
+    train_args: tuple[str, ...] = ()
+    """More fourierf-train flags for every run, passed as they are (e.g. --train-args --optimizer.lr-grids 0.08; a
+    flag a method does not use changes nothing for it). They are not part of a run's key: keep them fixed on resume."""
     iters: tuple[int, ...] = (800,)
     """Iteration budgets to sweep."""
     eval_points: int = 10
@@ -229,7 +232,7 @@ def run_bench(cfg: BenchConfig, command: str, preamble: list[str] | None = None)
     out_dir = coordinator.resume_dir(cfg.resume) if cfg.resume else coordinator.claim_output_dir(cfg.output_dir)
     out_dir = out_dir.resolve()
     tasks = [
-        RunTask(r, scene, out_dir, threads, cfg.device, lpips, cfg.keep_checkpoints)
+        RunTask(r, scene, out_dir, threads, cfg.device, lpips, cfg.keep_checkpoints, tuple(cfg.train_args))
         for r in runs
     ]  # fmt: skip
     settings = asdict(cfg) | {"command": command, "threads_per_run": threads}

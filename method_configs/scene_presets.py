@@ -44,7 +44,14 @@ def _set(obj: Any, path: str, value: Any) -> None:
     setattr(obj, leaf, value)
 
 
+SCHEDULE_SETTINGS = ("pipeline.model.occupancy_update_fractions", "pipeline.model.field.upsample_fractions")
+"""The real-scene values that are the pipeline's, not the method's: a generated field (zerorf-vm) takes only these and
+keeps its own loss and optimiser (ZeroRF's weight decay, no L1): the paper compares it at its published settings."""
+
+
 def real_scene_settings(config: Any) -> dict[str, Any]:
+    if config.pipeline.model.field.zerorf.enabled:
+        return {path: REAL_SCENE_SETTINGS[path] for path in SCHEDULE_SETTINGS}
     settings = dict(REAL_SCENE_SETTINGS)
     if config.pipeline.model.field.decomposition == "vm":
         settings |= VM_REAL_SCENE_SETTINGS

@@ -52,8 +52,9 @@ def _code_vm_model() -> FourieRFModelConfig:
 
 def _zerorf_model() -> FourieRFModelConfig:
     """ZeroRF (eliphatfs/zerorf, ``zerorf.py``, ``--rep tensorf``): generated VM factors, its decoder, the pixel loss
-    alone (its TV loss weight is 0 and it has no L1), the curriculum off, no distance scale (its renderer composites
-    ``1 - exp(-σδ)``) and its occlusion culling in training (gradients only where a sample's weight exceeds 1e-4)."""
+    alone (its TV loss weight is 0; it has no L1 and no occlusion term, even where a scene asks for FreeNeRF's), the
+    curriculum off, no distance scale (its renderer composites ``1 - exp(-σδ)``) and its occlusion culling in training
+    (gradients only where a sample's weight exceeds 1e-4)."""
     return FourieRFModelConfig(
         field=FieldConfig(decomposition="vm", zerorf=ZeroRFConfig(enabled=True)),
         fourier=FourierConfig(enabled=False),
@@ -61,6 +62,7 @@ def _zerorf_model() -> FourieRFModelConfig:
         tv_weight_appearance=0.0,
         l1_weight_initial=0.0,
         l1_weight_rest=0.0,
+        occlusion_weight=0.0,
         distance_scale=1.0,
         cull_weight_threshold=1e-4,
     )

@@ -1,8 +1,9 @@
 """What accuracy costs in time, for the paper's three methods: fourierf-vm, tensorf-vm and zerorf-vm (issue 20).
 
 Each method trains on the same pipeline (parsers, sampler, occupancy grid, compositing, trainer) through
-``fourierf-bench``, evaluated on the test views at every 10% of its budget (and 25%/50%) from checkpoints taken then;
-evaluation runs after training and is not timed. Two scenes:
+``fourierf-bench``, evaluated on the test views at every 25% of its budget (``--eval-points``) from checkpoints taken
+then; evaluation runs after training and is not timed (zerorf-vm's renders are slow on a CPU: 4 points keep the
+evaluation to minutes). Two scenes:
 
 * lego P-CPU: views r_27 r_76 r_97 r_99, 100×100 (``blender-data --downscale 4``), 25 test views (``--test-every 8``);
 * fern: 3 views (``llff-data --downscale 8 --num-views 3``, 504×378, NDC rays, the real-scene preset), the hold-out
@@ -12,7 +13,7 @@ evaluation runs after training and is not timed. Two scenes:
 Both: 800 iterations, batch 1024 rays, grid 64³ → 128³, seed 20211202. zerorf-vm's generators draw a canvas as fine
 as the final grid (128² planes on lego): its time is the cost of its deep image prior on this machine.
 
-    python benchmarks/three_methods.py                       # both scenes (~45 min on 2 cores; keep the machine quiet)
+    python benchmarks/three_methods.py                       # both scenes (~65 min on 2 cores; keep the machine quiet)
     python benchmarks/three_methods.py --scenes lego         # one scene (the section keeps the other's last results)
     python benchmarks/three_methods.py --resume-lego outputs/bench_three_methods/lego/<stamp>   # finish a cut-off one
     python benchmarks/three_methods.py --smoke               # 20 iterations, 2 evaluations, 5 lego test views,
@@ -84,7 +85,7 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--resume-lego", type=Path, default=None, help="a lego bench folder of a cut-off invocation")
     ap.add_argument("--resume-fern", type=Path, default=None, help="a fern bench folder of a cut-off invocation")
     ap.add_argument("--iters", type=int, default=800)
-    ap.add_argument("--eval-points", type=int, default=10)
+    ap.add_argument("--eval-points", type=int, default=4, help="test evaluations along each run (4: every 25%%)")
     ap.add_argument("--smoke", action="store_true", help="20 iterations, 2 evaluations, nothing published")
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md", help="'none' skips it")
     ap.add_argument("--publish", type=Path, default=REPO / "benchmarks" / "results",

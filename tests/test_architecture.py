@@ -50,6 +50,8 @@ LAYERS: dict[str, int] = {
     f"{PACKAGE}.engine": 6,
     # presets and the finished config
     f"{PACKAGE}.method_configs": 7,
+    f"{PACKAGE}.vis": 7,  # training observers: TensorBoard
+    f"{PACKAGE}.viewer": 8,  # the web viewer (loads runs, exports meshes)
     f"{PACKAGE}.bench": 8,
     f"{PACKAGE}.scripts": 9,
 }

@@ -8,6 +8,7 @@ import os
 import signal
 import time
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar, Literal
@@ -22,6 +23,13 @@ from fourierf_plugin.configs.base import InstantiateConfig, save_config
 from fourierf_plugin.engine.checkpoint import load_latest_checkpoint, save_checkpoint
 from fourierf_plugin.engine.estimates import describe_cost
 from fourierf_plugin.engine.machine import pick_device, seed_everything
+from fourierf_plugin.engine.observers import (
+    StepReport,
+    TrainingObserver,
+    notify_finished,
+    notify_started,
+    notify_step,
+)
 from fourierf_plugin.engine.optimizers import OptimizerConfig, build_optimizer, set_learning_rates
 from fourierf_plugin.engine.option_checks import check_training_options
 from fourierf_plugin.engine.run_dir import make_run_dir
@@ -91,8 +99,11 @@ class _DeferredStop:
 class Trainer:
     config: TrainerConfig
 
-    def __init__(self, config: TrainerConfig) -> None:
+    def __init__(self, config: TrainerConfig, observers: Sequence[TrainingObserver] = ()) -> None:
+        """``observers`` watch the run (the viewer, TensorBoard: ``scripts.observers.build_observers`` makes the ones
+        ``config.viewer``/``config.vis`` ask for); the trainer only tells them what happened."""
         self.config = config
+        self.observers = list(observers)
         self.console = get_console()
         self.start_step = 0
         self.resume_state: dict | None = None
@@ -211,6 +222,7 @@ class Trainer:
         # On the GPU paths the metrics are read from the device once per log interval, not every step.
         read_every_step = not uses_gpu_paths(c.pipeline.model.accel, self.device)
         shown: dict[str, float] = {}
+        notify_started(self.observers, self.pipeline, self.run_dir, self.start_step)
         with _DeferredStop() as interrupt, TaskProgress(c.max_num_iterations, self.start_step) as progress:
             for step in range(self.start_step, c.max_num_iterations):
                 with timer or contextlib.nullcontext(), phase("other"):
@@ -230,6 +242,7 @@ class Trainer:
                 if log_now or read_every_step:
                     shown = self.pipeline.read_metrics(metrics)
                 progress.update(done, **{k: shown[k] for k in ("loss", "psnr") if k in shown}, f=f_density)
+                record = None
                 if log_now:
                     record = {"step": done, **shown, "f_density": f_density, "f_color": f_color, "lr_scale": lr_scale}
                     record["elapsed_s"] = time.perf_counter() - started
@@ -238,6 +251,12 @@ class Trainer:
                         record["phases"] = timer.take()
                         phase_totals.update(record["phases"])
                     append_jsonl(metrics_path, record)
+                if self.observers:
+                    report = StepReport(
+                        done, c.max_num_iterations, dict(shown), f_density, f_color, lr_scale,
+                        time.perf_counter() - started, record, tuple(model.field.resolution),
+                    )  # fmt: skip
+                    notify_step(self.observers, self.pipeline, report)
                 if done % c.steps_per_save == 0 or done == c.max_num_iterations:
                     self.save(done, optimizer)
                 if done in c.export_mesh_at:
@@ -245,6 +264,7 @@ class Trainer:
                 if interrupt.requested:
                     break
         elapsed = time.perf_counter() - started
+        notify_finished(self.observers, self.pipeline, done, interrupted=done < c.max_num_iterations)
         if done < c.max_num_iterations:
             path = self.save(done, optimizer)
             name = signal.Signals(interrupt.exit_code - 128).name
@@ -305,5 +325,16 @@ class TrainerConfig(InstantiateConfig):
     """Grid resolution of the meshes exported during training."""
     profile_phases: bool = False
     """Time each phase of every iteration (filtering, sampling, field, backward, ...) into metrics.jsonl."""
+    viewer: bool = False
+    """Serve the web viewer during training (pip install 'fourierf[viewer]'): the scene as it forms, at a capped
+    render rate so training slows by at most about ``viewer_max_slowdown``."""
+    viewer_port: int = 7007
+    """Port of the web viewer (the next free one is taken, and said, when it is in use)."""
+    viewer_max_slowdown: float = 0.1
+    """The share of training time the live viewer's renders may take (0.1: training slows by at most ~10 %)."""
+    vis: Literal["none", "tensorboard"] = "none"
+    """Also log to TensorBoard under RUN/tensorboard (pip install 'fourierf[tensorboard]')."""
+    vis_image_every: int = 500
+    """With --vis tensorboard: render one training and one held-out view every N iterations."""
     scene_preset: Literal["auto", "synthetic", "real"] = "auto"
     """Synthetic or real-scene settings; auto picks real for forward-facing scenes (flags you set always win)."""

@@ -12,6 +12,7 @@ from fourierf_plugin.engine.trainer import Trainer, TrainerConfig
 from fourierf_plugin.method_configs import AnnotatedMethodUnion, finalize, resume_config
 from fourierf_plugin.method_configs.finalize import ignored_on_resume
 from fourierf_plugin.scripts.cli import run_cli, strip_verbose
+from fourierf_plugin.scripts.observers import build_observers
 from fourierf_plugin.utils.console import get_console
 from fourierf_plugin.utils.errors import fail
 
@@ -43,7 +44,7 @@ def main(args: list[str] | None = None) -> None:
     config, notes = build_config(parse_args(strip_verbose(sys.argv[1:] if args is None else args)))
     for note in notes:
         get_console().print(note, soft_wrap=True)
-    Trainer(config).train()
+    Trainer(config, build_observers(config)).train()
 
 
 def entrypoint() -> None:

@@ -1,0 +1,1 @@
+"""Training logs for outside tools (TensorBoard)."""

@@ -7,6 +7,7 @@ so the optimiser can be rebuilt. It never reaches into the trainer.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from dataclasses import dataclass
 from typing import ClassVar
@@ -273,18 +274,29 @@ class FourieRFModel(nn.Module):
 
     @torch.no_grad()
     def render_rays(
-        self, origins: Tensor, directions: Tensor, step: int, chunk: int | None = None
+        self,
+        origins: Tensor,
+        directions: Tensor,
+        step: int,
+        chunk: int | None = None,
+        cutoffs: tuple[float, float] | None = None,
     ) -> dict[str, Tensor]:
-        """Render whole images in eval mode, in chunks (no jitter, clamped colour), at the cutoffs of ``step``."""
+        """Render whole images in eval mode, in chunks (no jitter, clamped colour), at the cutoffs of ``step``.
+
+        ``cutoffs`` (f_density, f_color) renders the field low-passed there instead (the viewer's sliders); the
+        filtering prepared before is restored afterwards (``field.filtered_at``)."""
         was_training = self.training
         self.eval()
+        filtering = contextlib.nullcontext() if cutoffs is None else self.field.filtered_at(*cutoffs)
         try:
-            self.prepare(step)
-            chunk = chunk or self.config.accel.render_chunk_rays
-            parts = [
-                self.forward(origins[i : i + chunk], directions[i : i + chunk])
-                for i in range(0, max(origins.shape[0], 1), chunk)  # no rays: one empty chunk, empty outputs
-            ]
+            with filtering:
+                if cutoffs is None:
+                    self.prepare(step)
+                chunk = chunk or self.config.accel.render_chunk_rays
+                parts = [
+                    self.forward(origins[i : i + chunk], directions[i : i + chunk])
+                    for i in range(0, max(origins.shape[0], 1), chunk)  # no rays: one empty chunk, empty outputs
+                ]
         finally:
             self.train(was_training)
         return {k: torch.cat([p[k] for p in parts]) for k in ("rgb", "accumulation", "depth")}

@@ -1,0 +1,335 @@
+"""The web page: a viser server whose background is the model's render at each browser's camera, and its controls.
+
+Controls: which picture (rgb, depth, accumulation), the density and colour cutoffs (0 up to the run's own value at its
+step), the preview and final sizes, and "mesh at this cutoff". One background thread renders for every connected
+browser: a small preview while the camera (or a slider) moves, the final size once it has rested ``rest_seconds``.
+viser's own callbacks only record what changed, so the page never waits for the model.
+"""
+
+from __future__ import annotations
+
+import collections
+import importlib
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING
+
+from fourierf_plugin.exporter.marching_cubes import describe, export_field_mesh
+from fourierf_plugin.utils.console import get_console, warn
+from fourierf_plugin.utils.errors import UserError, fail
+from fourierf_plugin.viewer.render_budget import RenderBudget
+from fourierf_plugin.viewer.render_service import OUTPUTS, Output, camera_from_opencv_pose, render_view
+from fourierf_plugin.viewer.scene_view import add_test_views, build_scene
+from fourierf_plugin.viewer.viewed_run import ViewedRun
+
+if TYPE_CHECKING:
+    import viser
+
+    from fourierf_plugin.data.dataparser_base import DataparserOutputs
+
+EXTRA_FIX = "pip install 'fourierf[viewer]'"
+MESH_RESOLUTION = 128
+
+
+def require_viser() -> ModuleType:
+    """The viser module, or one clear error naming the extra that provides it."""
+    try:
+        return importlib.import_module("viser")
+    except ImportError as err:
+        problem = f"the web viewer needs the optional package viser, which is not installed ({err})"
+        raise UserError(problem, EXTRA_FIX) from err
+
+
+def open_server(port: int, host: str = "0.0.0.0") -> viser.ViserServer:
+    """A viser server on ``port``, or on the next free one when it is taken (said aloud, with the address); port 0
+    takes any free port."""
+    if not 0 <= port <= 65535:
+        fail(f"--port {port} is not a TCP port", "pass a port in 1-65535, e.g. 7007 (0: any free port)")
+    viser_module = require_viser()
+    server = viser_module.ViserServer(host=host, port=port, verbose=False)
+    actual = server.get_port()
+    console = get_console()
+    if port != 0 and actual != port:
+        console.print(f"[yellow]port {port} is in use: the viewer takes the next free port, {actual}[/yellow]")
+    console.print(f"[bold]viewer[/bold] at http://localhost:{actual} (Ctrl-C stops it)")
+    return server
+
+
+@dataclass
+class ViewerSettings:
+    preview_side: int = 256
+    """Pixels along the preview's longer side (shown while the camera moves)."""
+    final_side: int = 768
+    """Pixels along the final picture's longer side (shown once the camera rests)."""
+    rest_seconds: float = 0.3
+    """How long the camera must stay still before the final picture is rendered."""
+    jpeg_quality: int = 90
+
+
+@dataclass(frozen=True)
+class RenderRecord:
+    """One picture sent to a browser (kept for the latency benchmark and the tests)."""
+
+    sent_at: float
+    """``time.perf_counter()`` when the picture was handed to the browser's connection."""
+    final: bool
+    width: int
+    height: int
+    render_seconds: float
+
+
+@dataclass
+class _ClientView:
+    """One browser: its camera's generation (bumped on every move) and what is on its screen."""
+
+    client: viser.ClientHandle
+    camera_generation: int = 0
+    moved_at: float = 0.0
+    shown: tuple[int, int] | None = None
+    shown_final: bool = False
+
+
+def unique_mesh_path(meshes: Path, f_density: float) -> Path:
+    """``meshes/viewer-f<value>.ply``, with -2, -3, ... appended rather than overwriting an earlier export."""
+    stem = f"viewer-f{f_density:.3f}"
+    path = meshes / f"{stem}.ply"
+    n = 2
+    while path.exists():
+        path = meshes / f"{stem}-{n}.ply"
+        n += 1
+    return path
+
+
+class ViewerServer:
+    """The page's content and its render thread, on a running viser server (``open_server``)."""
+
+    def __init__(
+        self,
+        server: viser.ViserServer,
+        viewed: ViewedRun,
+        train: DataparserOutputs,
+        test: DataparserOutputs | None,
+        settings: ViewerSettings | None = None,
+        budget: RenderBudget | None = None,
+    ) -> None:
+        self.server = server
+        self.viewed = viewed
+        self.settings = settings or ViewerSettings()
+        self.budget = budget or RenderBudget(None)
+        self._clients: dict[int, _ClientView] = {}
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._generation = 0  # bumped by every control change and every new snapshot
+        self._changed_at = 0.0
+        self.last_render_seconds: float | None = None
+        self.renders = 0
+        self._rendering = False
+        self.final_renders = 0
+        self.log: collections.deque[RenderRecord] = collections.deque(maxlen=1000)
+        self.layout, self.frustums = build_scene(server, train, test)
+        self._build_gui()
+        server.on_client_connect(self.connect)
+        server.on_client_disconnect(self._disconnected)
+        self._thread = threading.Thread(target=self._render_loop, name="fourierf-viewer-render", daemon=True)
+        self._thread.start()
+
+    def show_test_views(self, test: DataparserOutputs | None) -> None:
+        """Add the held-out views' frustums later (the live viewer loads them off the training thread)."""
+        if test is not None:
+            added = add_test_views(self.server, test, self.layout)
+            for frustum in added:
+                frustum.visible = self.show_cameras.value
+            self.frustums += added
+
+    # -- controls ---------------------------------------------------------------------------------------------------
+    def _build_gui(self) -> None:
+        gui = self.server.gui
+        f_density, f_color = self.viewed.run_cutoffs()
+        self.status = gui.add_markdown(self._status_text())
+        self.output = gui.add_dropdown("Output", OUTPUTS, initial_value="rgb")
+        self.density_slider = gui.add_slider(
+            "Density cutoff", 0.0, max(f_density, 0.01), 0.01, f_density, hint="share of the spectrum kept (0-1)"
+        )
+        self.color_slider = gui.add_slider(
+            "Colour cutoff", 0.0, max(f_color, 0.01), 0.01, f_color, hint="share of the spectrum kept (0-1)"
+        )
+        self.preview_slider = gui.add_slider("Preview size", 32, 512, 32, self.settings.preview_side)
+        self.final_slider = gui.add_slider("Final size", 64, 2048, 32, self.settings.final_side)
+        self.show_cameras = gui.add_checkbox("Show cameras", True, hint="training views orange, test views blue")
+        self.show_cameras.on_update(lambda _: self._show_cameras(self.show_cameras.value))
+        self.mesh_button = gui.add_button("Mesh at this cutoff", hint="marching cubes at the density cutoff")
+        for handle in (self.output, self.density_slider, self.color_slider, self.preview_slider, self.final_slider):
+            handle.on_update(lambda _: self.changed())
+        self.mesh_button.on_click(lambda event: self.export_mesh(event.client))
+
+    def _show_cameras(self, visible: bool) -> None:
+        for frustum in self.frustums:
+            frustum.visible = visible
+
+    def changed(self, moving: bool = True) -> None:
+        """Everything on screen is out of date (a control moved, or a new snapshot arrived when not ``moving``)."""
+        with self._lock:
+            self._generation += 1
+            if moving:
+                self._changed_at = time.perf_counter()
+        self._wake.set()
+
+    def follow_run_cutoffs(self) -> None:
+        """Widen the sliders to the run's current cutoffs (live training); a slider at its top stays at the top."""
+        for slider, value in zip((self.density_slider, self.color_slider), self.viewed.run_cutoffs(), strict=True):
+            top = max(value, 0.01)
+            at_top = slider.value >= slider.max - 1e-9
+            if top != slider.max:
+                slider.max = top
+                if at_top or slider.value > top:
+                    slider.value = top
+
+    def cutoffs(self) -> tuple[float, float]:
+        return float(self.density_slider.value), float(self.color_slider.value)
+
+    def refresh_status(self) -> None:
+        self.status.content = self._status_text()
+
+    def _status_text(self) -> str:
+        viewed = self.viewed
+        f_density, f_color = viewed.run_cutoffs()
+        lines = [f"**step** {viewed.step} · run cutoffs density {f_density:.2f}, colour {f_color:.2f}"]
+        progress = viewed.progress
+        if progress is not None:
+            state = "finished" if progress.finished else "training"
+            lines[0] = f"**{state}** step {progress.step} / {progress.max_steps} (shown: {viewed.step})"
+            numbers = [f"{k} {progress.metrics[k]:.4g}" for k in ("loss", "psnr") if k in progress.metrics]
+            lines.append(f"cutoffs density {progress.f_density:.2f}, colour {progress.f_color:.2f}")
+            if numbers:
+                lines.append(" · ".join(numbers))
+        if hasattr(self, "density_slider"):
+            lines.append(f"shown at density {self.cutoffs()[0]:.2f}, colour {self.cutoffs()[1]:.2f}")
+        if self.last_render_seconds is not None:
+            lines.append(f"last render {self.last_render_seconds:.2f} s")
+        return "  \n".join(lines)
+
+    # -- clients ----------------------------------------------------------------------------------------------------
+    def connect(self, client: viser.ClientHandle) -> None:
+        """Start drawing for a browser (viser calls this for each one that connects)."""
+        view = _ClientView(client)
+        with self._lock:
+            self._clients[client.client_id] = view
+
+        def moved(_: object) -> None:
+            with self._lock:
+                view.camera_generation += 1
+                view.moved_at = time.perf_counter()
+            self._wake.set()
+
+        client.camera.on_update(moved)
+
+    def _disconnected(self, client: viser.ClientHandle) -> None:
+        with self._lock:
+            self._clients.pop(client.client_id, None)
+
+    @property
+    def client_count(self) -> int:
+        with self._lock:
+            return len(self._clients)
+
+    # -- rendering --------------------------------------------------------------------------------------------------
+    def _next_job(self) -> tuple[_ClientView, tuple[int, int], bool] | None:
+        """A browser whose picture is out of date, the state to render, and whether at the final size."""
+        now = time.perf_counter()
+        with self._lock:
+            for view in self._clients.values():
+                if view.camera_generation == 0:
+                    continue  # no camera reported yet
+                key = (view.camera_generation, self._generation)
+                rested = now - max(view.moved_at, self._changed_at) >= self.settings.rest_seconds
+                if key != view.shown or (rested and not view.shown_final):
+                    return view, key, rested
+        return None
+
+    def _outdated(self, view: _ClientView, key: tuple[int, int]) -> bool:
+        """The browser's camera or a control changed since ``key`` (checked between blocks of a render)."""
+        return (view.camera_generation, self._generation) != key or self._stop.is_set()
+
+    def _render_loop(self) -> None:
+        while not self._stop.is_set():
+            job = self._next_job()
+            if job is None:
+                self._wake.wait(0.05)
+                self._wake.clear()
+                continue
+            wait = self.budget.wait_seconds()
+            if wait > 0:
+                self._stop.wait(min(wait, 0.05))
+                continue
+            self._rendering = True
+            try:
+                self._render(*job)
+            except Exception as err:  # a failed picture must not end the page (or the training it watches)
+                warn(f"viewer render failed: {err}")
+                self._stop.wait(1.0)
+            finally:
+                self._rendering = False
+
+    @property
+    def busy(self) -> bool:
+        """A picture is being rendered or is due (a browser's view is out of date)."""
+        return self._rendering or self._next_job() is not None
+
+    def _render(self, view: _ClientView, key: tuple[int, int], final: bool) -> None:
+        camera = view.client.camera
+        side = int(self.final_slider.value if final else self.preview_slider.value)
+        pose = camera_from_opencv_pose(camera.wxyz, camera.position, camera.fov, camera.aspect, side)
+        output: Output = self.output.value  # type: ignore[assignment]
+        started = time.perf_counter()
+        with self.viewed.lock:
+            rendered = render_view(self.viewed.model, pose, self.cutoffs(), abort=lambda: self._outdated(view, key))
+        self.budget.charge(started, time.perf_counter() - started)
+        if rendered is None:
+            return  # the camera or a control moved during the render: the next job starts with a preview
+        view.client.scene.set_background_image(
+            rendered.image(output), format="jpeg", jpeg_quality=self.settings.jpeg_quality
+        )
+        with self._lock:
+            view.shown, view.shown_final = key, final
+        self.log.append(RenderRecord(time.perf_counter(), final, pose.width, pose.height, rendered.seconds))
+        self.last_render_seconds = rendered.seconds
+        self.renders += 1
+        self.final_renders += int(final)
+        self.refresh_status()
+
+    # -- mesh -------------------------------------------------------------------------------------------------------
+    def export_mesh(self, client: viser.ClientHandle | None = None) -> Path | None:
+        """Marching cubes of the density at the slider's cutoff into RUN/meshes/ (never over an earlier file)."""
+        f_density = self.cutoffs()[0]
+        self.mesh_button.disabled = True
+        try:
+            with self.viewed.lock:
+                path = unique_mesh_path(self.viewed.run_dir / "meshes", f_density)
+                report = export_field_mesh(
+                    self.viewed.model, self.viewed.step, path, resolution=MESH_RESOLUTION, frequency_cap=f_density
+                )
+            message = f"mesh at cutoff {f_density:.3f}: {path}"
+            get_console().print(message + "; " + "; ".join(describe(report)))
+        except UserError as err:
+            message, path = f"no mesh at cutoff {f_density:.3f}: {err.problem}", None
+            warn(message)
+        finally:
+            self.mesh_button.disabled = False
+        if client is not None:
+            client.add_notification("Mesh export", message, auto_close_seconds=8.0)
+        return path
+
+    # -- shutdown ---------------------------------------------------------------------------------------------------
+    def stop(self) -> None:
+        """Stop rendering and close the page's server (idempotent)."""
+        if self._stop.is_set():
+            return
+        self._stop.set()
+        self._wake.set()
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(timeout=30.0)
+        self.server.stop()

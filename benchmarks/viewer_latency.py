@@ -37,6 +37,7 @@ import numpy as np
 
 from fourierf_plugin.bench.protocol import BIN, GRID_FLAGS, section_head, update_benchmarks_md
 from fourierf_plugin.scripts.viewer import ViewerConfig, ViewerHandle, serve
+from fourierf_plugin.viewer.headless import CHROMIUM, CHROMIUM_ARGS
 from fourierf_plugin.viewer.render_service import camera_from_dataset, render_view
 from fourierf_plugin.viewer.scene_view import scene_layout
 
@@ -50,11 +51,6 @@ TINY_FLAGS = [
     "--pipeline.datamanager.rays-per-batch", "256",
     "--pipeline.model.field.n-voxels-init", "4096",
     "--pipeline.model.field.n-voxels-final", "13824",
-]  # fmt: skip
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = [
-    "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
-    "--disable-component-update", "--disable-sync", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
 ]  # fmt: skip
 SQUARE_WINDOW = {"width": 704, "height": 704}
 LATENCY_TARGET_S = 0.5
@@ -74,7 +70,7 @@ def headless_page(url: str, viewport: dict[str, int] = SQUARE_WINDOW) -> Iterato
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=list(CHROMIUM_ARGS))
         try:
             page = browser.new_page(viewport=viewport)
             page.goto(url, wait_until="load", timeout=60_000)

@@ -7,6 +7,7 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
+from typing import NoReturn
 
 import pytest
 import torch
@@ -19,11 +20,15 @@ def require_shared(*parts: str) -> Path:
     """Path under ../shared; skips with the reason when it is absent, but fails in CI where it must be present."""
     path = SHARED_DIR.joinpath(*parts)
     if not path.exists():
-        reason = f"{path} is absent: clone the project with its shared/ material beside it to run this test"
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail(f"CI=true but {reason}")
-        pytest.skip(reason)
+        skip_outside_ci(f"{path} is absent: clone the project with its shared/ material beside it to run this test")
     return path
+
+
+def skip_outside_ci(reason: str) -> NoReturn:
+    """Skip a test whose requirement is missing here, but fail it in CI, which must provide every requirement."""
+    if os.environ.get("CI", "").lower() == "true":
+        pytest.fail(f"CI=true but {reason}")
+    pytest.skip(reason)
 
 
 def require_module(name: str, why: str) -> ModuleType:
@@ -32,9 +37,7 @@ def require_module(name: str, why: str) -> ModuleType:
     try:
         return importlib.import_module(name)
     except ImportError:
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail(f"CI=true but {name} is not installed: {why}")
-        pytest.skip(why)
+        skip_outside_ci(f"{name} is not installed: {why}")
 
 
 @pytest.fixture

@@ -25,7 +25,7 @@ from fourierf_plugin.data.datamanager import camera_rays
 from fourierf_plugin.engine.observers import StepReport
 from fourierf_plugin.model_components.rendering import background_color, composite_target
 from fourierf_plugin.utils.colormaps import colorize_depth
-from fourierf_plugin.utils.errors import fail
+from fourierf_plugin.utils.errors import UserError, fail
 
 if TYPE_CHECKING:
     from fourierf_plugin.cameras.cameras import Cameras
@@ -114,7 +114,7 @@ class TensorBoardObserver:
             for split in splits:
                 try:
                     outputs = parser.get_outputs(split)  # type: ignore[arg-type]
-                except Exception:  # a scene without this split: try the next one
+                except UserError:  # a scene without this split (parsers say so): try the next one
                     continue
                 if len(outputs.cameras):
                     views[label] = (outputs.cameras, outputs.images[0], f"{split}:{outputs.image_names[0]}")

@@ -7,7 +7,6 @@ chromium is missing; in CI (which installs them) it fails instead.
 from __future__ import annotations
 
 import io
-import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -17,32 +16,18 @@ import pytest
 from PIL import Image
 
 from fourierf_plugin.scripts.viewer import ViewerConfig, ViewerHandle, serve
+from fourierf_plugin.viewer.headless import CHROMIUM, CHROMIUM_ARGS
 from fourierf_plugin.viewer.render_service import high_frequency_energy
-from tests.conftest import require_module
+from tests.conftest import require_module, skip_outside_ci
 
 pytestmark = pytest.mark.slow
 
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--use-angle=swiftshader",  # WebGL in software: the page draws its scene with three.js
-    "--enable-unsafe-swiftshader",
-]
 VIEWPORT = {"width": 960, "height": 640}
 
 
 def require_chromium() -> Path:
     if not CHROMIUM.exists():
-        reason = f"{CHROMIUM} is absent: install Debian's chromium package to run the browser test"
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail(f"CI=true but {reason}")
-        pytest.skip(reason)
+        skip_outside_ci(f"{CHROMIUM} is absent: install Debian's chromium package to run the browser test")
     return CHROMIUM
 
 
@@ -82,7 +67,7 @@ def test_the_page_shows_the_render_and_a_zero_cutoff_smooths_it(trained_run) -> 
     handle = serve(cfg)
     try:
         with sync_api.sync_playwright() as playwright:
-            browser = playwright.chromium.launch(executable_path=str(chromium), args=CHROMIUM_ARGS)
+            browser = playwright.chromium.launch(executable_path=str(chromium), args=list(CHROMIUM_ARGS))
             try:
                 page = browser.new_page(viewport=VIEWPORT)
                 page.goto(handle.url, wait_until="load", timeout=30_000)

@@ -59,19 +59,28 @@ def finalize(config: TrainerConfig) -> tuple[TrainerConfig, list[str]]:
         if kept:
             notes.append(f"  kept your settings for: {', '.join(kept)}")
     config.scene_preset = preset
-    notes += size_the_run(config, all_methods.get(config.method_name))
+    notes += size_the_run(config, all_methods.get(config.method_name), not declared.bounded)
+    resolve_tv_decay(config)
     effects = config.pipeline.effects.resolve(declared)
     config.pipeline.effects = EffectsConfig.of(effects)
     notes.append(f"scene effects: {effects.describe()} (the scene declares: {declared.describe()})")
     return config, notes
 
 
-def size_the_run(config: TrainerConfig, pristine: TrainerConfig | None) -> list[str]:
-    """Iterations, batch and grid from the training images and the device (``sizing``), where the user left the
-    preset's values; the note that says so."""
+def resolve_tv_decay(config: TrainerConfig) -> None:
+    """TensoRF decays its TV weights by the lr's factor: an unset ``tv_decay_ratio`` becomes the optimiser's
+    ``lr_decay_ratio`` here, once, so the model never reads the optimiser's config (a value the user gave stays)."""
+    model = config.pipeline.model
+    if model.tv_decay_ratio is None:
+        model.tv_decay_ratio = config.optimizer.lr_decay_ratio
+
+
+def size_the_run(config: TrainerConfig, pristine: TrainerConfig | None, forward_facing: bool) -> list[str]:
+    """Iterations, batch and grid from the training images, the device and the kind of scene (``sizing``), where the
+    user left the preset's values; the note that says so."""
     train = config.pipeline.datamanager.dataparser.setup().get_outputs("train")
     views, height, width = train.images.shape[0], train.cameras.height, train.cameras.width
-    size = run_size(views, height, width, pick_device(config.device))
+    size = run_size(views, height, width, pick_device(config.device), forward_facing)
     applied, kept = apply_settings(config, pristine, size.settings())
     if not applied:
         return []

@@ -96,7 +96,8 @@ fourierf_cp = _trainer("fourierf-cp", _cp_model(fourier=True))
 fourierf_vm_code = _trainer(
     "fourierf-vm-code",
     _code_vm_model(),
-    OptimizerConfig(betas=(0.9, 0.99), weight_decay=0.0, lr_decay_ratio=1.0),
+    # The official code: AdamW (0.9, 0.99) at first, (0.9, 0.98) at every rebuild after a reset (spec §4.5).
+    OptimizerConfig(betas=(0.9, 0.99), betas_after_reset=(0.9, 0.98), weight_decay=0.0, lr_decay_ratio=1.0),
     EffectsConfig(view_dependent=True),
 )
 tensorf_vm = _trainer("tensorf-vm", _vm_model(fourier=False))

@@ -4,7 +4,9 @@ Why: the method presets carry the paper's GPU settings (10k iterations, batch 40
 on two CPU cores for the bundled 100×100 scene. The rule, applied to every size the user leaves at the preset's
 value (a flag always wins):
 
-* on a GPU: the paper's settings;
+* on a GPU: the paper's settings; a forward-facing scene gets TensoRF's LLFF final grid, 640³ (the old FourieRF LLFF
+  configs' too; the paper gives no real-scene grid, and 300³ is its synthetic one). The initial grid is 128³ either
+  way: TensoRF's LLFF ``N_voxel_init`` is 2097156 ≈ 128³, which on the NDC box is the 141×157×94 of its table;
 * on a CPU: 800 iterations of 1024 rays (protocol P-CPU, a few minutes), and a final grid of 1.28 voxels per pixel of
   the training images' larger side, between 64³ and 192³, upsampled from half that side (100×100 images:
   64³ → 128³, what ``make demo`` used before this rule).
@@ -23,6 +25,8 @@ CPU_SIDE = (64, 192)
 """The final grid's side on a CPU, at least and at most."""
 GPU = {"iterations": 10000, "rays_per_batch": 4096, "init_side": 128, "final_side": 300}
 """The paper's settings."""
+GPU_FORWARD_FACING_FINAL_SIDE = 640
+"""TensoRF's LLFF final grid (``configs/flower.txt``: N_voxel_final 262144000 = 640³)."""
 
 
 @dataclass(frozen=True)
@@ -43,13 +47,17 @@ class RunSize:
         }
 
 
-def run_size(views: int, height: int, width: int, device: torch.device) -> RunSize:
-    """The sizes the rule gives for ``views`` training images of ``height`` × ``width`` on ``device``."""
+def run_size(views: int, height: int, width: int, device: torch.device, forward_facing: bool = False) -> RunSize:
+    """The sizes the rule gives for ``views`` training images of ``height`` × ``width`` on ``device`` (of a
+    forward-facing scene if ``forward_facing``)."""
     scene = f"{views} view(s) of {width}x{height} on {device.type}"
     if device.type != "cpu":
+        final, grid = GPU["final_side"], ""
+        if forward_facing:
+            final, grid = GPU_FORWARD_FACING_FINAL_SIDE, f", TensoRF's LLFF final grid {GPU_FORWARD_FACING_FINAL_SIDE}³"
         return RunSize(
-            GPU["iterations"], GPU["rays_per_batch"], GPU["init_side"] ** 3, GPU["final_side"] ** 3,
-            f"{scene}: the paper's settings",
+            GPU["iterations"], GPU["rays_per_batch"], GPU["init_side"] ** 3, final**3,
+            f"{scene}: the paper's settings{grid}",
         )  # fmt: skip
     low, high = CPU_SIDE
     side = min(high, max(low, round(CPU_VOXELS_PER_PIXEL * max(height, width))))

@@ -82,6 +82,7 @@ RULES: tuple[Rule, ...] = (
     Rule(f"{_MODEL}.tv_weight_appearance", at_least(0.0), "a weight >= 0", "1.0"),
     Rule(f"{_MODEL}.l1_weight_initial", at_least(0.0), "a weight >= 0", "8e-5"),
     Rule(f"{_MODEL}.l1_weight_rest", at_least(0.0), "a weight >= 0", "4e-5"),
+    Rule(f"{_MODEL}.tv_decay_ratio", optional(positive), "a ratio > 0 (1 = no decay; omitted = the lr's)", "0.1"),
     Rule(f"{_MODEL}.occlusion_weight", at_least(0.0), "a weight >= 0", "0.01"),
     Rule(f"{_MODEL}.cull_weight_threshold", within(0.0, 1.0), "a weight in [0, 1] (0 = off)", "1e-4"),
     Rule(f"{_MODEL}.occlusion_fraction", within(1e-9, 1.0), "a fraction of the ray in (0, 1]", "0.15625"),
@@ -104,6 +105,7 @@ RULES: tuple[Rule, ...] = (
     Rule("optimizer.lr_generator", positive, "a learning rate > 0", "2e-3"),
     Rule("optimizer.generator_grad_clip", at_least(0.0), "a gradient norm >= 0 (0 = never clip)", "0.32"),
     Rule("optimizer.betas", each(within(0.0, 1.0 - 1e-12)), "two numbers in [0, 1)", "0.9 0.98"),
+    Rule("optimizer.betas_after_reset", optional(each(within(0.0, 1.0 - 1e-12))), "two numbers in [0, 1)", "0.9 0.98"),
     Rule("optimizer.weight_decay", at_least(0.0), "a number >= 0", "0.2"),
     Rule("optimizer.lr_decay_ratio", positive, "a ratio > 0 (1 = no decay)", "0.1"),
 )

@@ -184,9 +184,10 @@ class Trainer:
     def save(self, step: int, optimizer: torch.optim.Optimizer) -> Path:
         return save_checkpoint(self._state(step, optimizer), self.checkpoint_dir, step, self.config.keep_checkpoints)
 
-    def _restore(self, state: dict) -> torch.optim.Optimizer:
+    def _restore(self, state: dict, reset_steps: list[int]) -> torch.optim.Optimizer:
         self.pipeline.load_state_dict(state["pipeline"])
-        optimizer = build_optimizer(self.config.optimizer, self.pipeline.model.param_groups())
+        groups = self.pipeline.model.param_groups()
+        optimizer = build_optimizer(self.config.optimizer, groups, self.start_step, reset_steps)
         optimizer.load_state_dict(state["optimizer"])
         self.generator.set_state(state["generator"])
         torch.set_rng_state(state["torch_rng"])
@@ -206,11 +207,11 @@ class Trainer:
     def train(self) -> Path:
         c = self.config
         model = self.pipeline.model
+        reset_steps = [s + 1 for s in model.reset_steps()]  # the first iterations run by a rebuilt optimiser
         if self.resume_state is not None:
-            optimizer = self._restore(self.resume_state)
+            optimizer = self._restore(self.resume_state, reset_steps)
         else:
-            optimizer = build_optimizer(c.optimizer, model.param_groups())
-        reset_steps = [s + 1 for s in model.reset_steps()]
+            optimizer = build_optimizer(c.optimizer, model.param_groups(), self.start_step, reset_steps)
         metrics_path = self.run_dir / "metrics.jsonl"
         if self.start_step:
             drop_records_after(metrics_path, self.start_step)
@@ -235,7 +236,7 @@ class Trainer:
                         optimizer.step()
                     changes = self.pipeline.after_step(step)
                     if changes.params_replaced:
-                        optimizer = build_optimizer(c.optimizer, model.param_groups())
+                        optimizer = build_optimizer(c.optimizer, model.param_groups(), step + 1, reset_steps)
                 done = step + 1
                 f_density, f_color = model.cutoffs(step)
                 log_now = done % c.log_every == 0 or done == c.max_num_iterations

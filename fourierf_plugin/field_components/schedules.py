@@ -24,6 +24,7 @@ __all__ = [
     "step_size",
     "steps_from_fractions",
     "train_samples_per_ray",
+    "tv_weight_at",
     "voxel_counts",
 ]
 
@@ -96,6 +97,12 @@ def lr_scale_at(step: int, reset_steps: Sequence[int], decay_ratio: float, max_i
         return 1.0
     factor = decay_ratio ** (1.0 / max_iters)
     return factor ** (step - last_reset_at(step, reset_steps))
+
+
+def tv_weight_at(step: int, initial: float, decay_ratio: float, max_iters: int) -> float:
+    """TV weight: TensoRF multiplies it by ``decay_ratio ** (1 / max_iters)`` every iteration and never restarts it,
+    so it is ``initial · decay_ratio ** (step / max_iters)`` whatever the lr resets."""
+    return float(initial) * lr_scale_at(step, (), decay_ratio, max_iters)
 
 
 def l1_weight_at(step: int, first_mask_step: int | None, initial: float, rest: float) -> float:

@@ -69,16 +69,18 @@ class FourierConfig:
     """Official-code behaviour: appearance planes use the density cutoff instead of the colour cutoff."""
 
 
-def occlusion_penalty(sigma: Tensor, fraction: float) -> Tensor:
+def occlusion_penalty(sigma: Tensor, fraction: float, distance_scale: float) -> Tensor:
     """FreeNeRF's occlusion term: mean over rays and all K samples of σ_k · 1[k < M], M = round(fraction · K).
 
-    It penalises density right in front of the cameras, where few-shot training likes to paint floaters.
+    It penalises density right in front of the cameras, where few-shot training likes to paint floaters. FreeNeRF
+    composites ``1 - exp(-σ δ)``, this pipeline ``1 - exp(-distance_scale · σ δ)``: the term is on FreeNeRF's σ,
+    ``distance_scale · σ``, so its weight 0.01 means what it means there.
     """
     k = sigma.shape[-1]
     if sigma.shape[0] == 0 or k == 0:
         return sigma.sum()  # no rays: 0 with a graph, not the NaN of an empty mean
     m = max(1, round(fraction * k))
-    return sigma[:, :m].sum(dim=-1).mean() / k
+    return distance_scale * sigma[:, :m].sum(dim=-1).mean() / k
 
 
 @dataclass
@@ -160,6 +162,11 @@ class FourieRFModel(nn.Module):
             return []
         return sorted(set(self.upsample_steps) | set(self.occupancy_steps))
 
+    def tv_scale(self, step: int) -> float:
+        """Multiplier of both TV weights at ``step`` (TensoRF's per-iteration decay; no decay when unset)."""
+        ratio = self.config.tv_decay_ratio
+        return 1.0 if ratio is None else schedules.tv_weight_at(step, 1.0, ratio, self.max_iters)
+
     def l1_weight(self, step: int) -> float:
         # The switch happens after the first update's own step, i.e. from the next step on.
         first = self.occupancy_steps[0] + 1 if self.occupancy_steps else None
@@ -222,7 +229,7 @@ class FourieRFModel(nn.Module):
             depth = expected_depth(weights, samples.t, torch.full_like(acc, self.far))
         out = {"rgb": rgb, "accumulation": acc, "depth": depth, "background": background}
         if self.training and self.effects.occlusion_regularization:
-            out["occlusion"] = occlusion_penalty(sigma, self.config.occlusion_fraction)
+            out["occlusion"] = occlusion_penalty(sigma, self.config.occlusion_fraction, self.config.distance_scale)
         return out
 
     def sample(self, origins: Tensor, directions: Tensor) -> RaySamples:
@@ -260,11 +267,13 @@ class FourieRFModel(nn.Module):
         c = self.config
         tv_terms = self.field.ops.squared_differences
         out = {"mse": losses.mse(outputs["rgb"], target)}
+        tv_scale = self.tv_scale(step)
         if c.tv_weight_density > 0:
-            out["tv_density"] = c.tv_weight_density * losses.grid_tv(g.density.planes, g.density.lines, sq=tv_terms)
+            tv = losses.grid_tv(g.density.planes, g.density.lines, sq=tv_terms)
+            out["tv_density"] = c.tv_weight_density * tv_scale * tv
         if c.tv_weight_appearance > 0:
             tv = losses.grid_tv(g.appearance.planes, g.appearance.lines, sq=tv_terms)
-            out["tv_appearance"] = c.tv_weight_appearance * tv
+            out["tv_appearance"] = c.tv_weight_appearance * tv_scale * tv
         l1 = self.l1_weight(step)
         if l1 > 0:
             out["l1_density"] = l1 * losses.density_l1(g.density.planes, g.density.lines)
@@ -412,6 +421,10 @@ class FourieRFModelConfig(InstantiateConfig):
     """Total-variation weight on the (filtered) density planes."""
     tv_weight_appearance: float = 1.0
     """Total-variation weight on the (filtered) appearance planes."""
+    tv_decay_ratio: float | None = None
+    """Both TV weights at the end of the run relative to the start, decayed every iteration and never restarted
+    (TensoRF). None: the optimiser's ``lr_decay_ratio``, set when the run is configured; a model built from a config
+    that still says None does not decay."""
     l1_weight_initial: float = 8e-5
     """Density L1 weight before the first occupancy update."""
     l1_weight_rest: float = 4e-5

@@ -8,6 +8,7 @@ with a message that says which format the file has and which one this version re
 
 from __future__ import annotations
 
+import copy
 import json
 from pathlib import Path
 
@@ -95,6 +96,21 @@ def test_save_and_load_config_round_trip(tmp_path: Path) -> None:
     assert load_config(path, TrainerConfig, registry) == config
     assert load_config(tmp_path, TrainerConfig, registry) == config, "a run directory resolves to its config.json"
     assert not list(tmp_path.glob("*.tmp")), "the atomic write leaves no temp file"
+
+
+def test_the_new_optimiser_and_tv_fields_round_trip_and_old_configs_without_them_load(tmp_path: Path) -> None:
+    """``betas_after_reset`` and ``tv_decay_ratio`` come back as written; a config.json saved before they existed
+    loads with both None, i.e. as that run trained (one set of betas, no TV decay)."""
+    config = copy.deepcopy(all_methods["fourierf-vm-code"])
+    config.pipeline.model.tv_decay_ratio = 0.25
+    save_config(config, tmp_path / "config.json")
+    again = load_config(tmp_path, TrainerConfig, config_registry())
+    assert again.optimizer.betas_after_reset == (0.9, 0.98) and again.pipeline.model.tv_decay_ratio == 0.25
+    old = json.loads((tmp_path / "config.json").read_text())
+    del old["config"]["optimizer"]["betas_after_reset"], old["config"]["pipeline"]["model"]["tv_decay_ratio"]
+    legacy = load_config(_write(tmp_path, old), TrainerConfig, config_registry())
+    assert legacy.optimizer.betas_after_reset is None and legacy.pipeline.model.tv_decay_ratio is None
+    assert legacy.optimizer.betas == (0.9, 0.99)
 
 
 # -- every defect is one UserError that names the file ----------------------------------------------------------

@@ -19,6 +19,7 @@ from fourierf_plugin.field_components.schedules import (
     step_size,
     steps_from_fractions,
     train_samples_per_ray,
+    tv_weight_at,
     voxel_counts,
 )
 
@@ -115,6 +116,18 @@ def test_lr_scale_no_decay() -> None:
 def test_lr_scale_rejects_bad_ratio(bad: float) -> None:
     with pytest.raises(ValueError, match="decay ratio"):
         lr_scale_at(10, [], bad, 100)
+
+
+def test_tv_weight_decays_like_tensorf_and_ignores_resets() -> None:
+    """TensoRF: TV_weight *= 0.1 ** (1 / n_iters) every iteration, so w0 · 0.1 ** (s / n_iters), never restarted."""
+    max_iters = 10_000
+    assert tv_weight_at(0, 1.0, 0.1, max_iters) == 1.0
+    assert tv_weight_at(max_iters // 2, 2.0, 0.1, max_iters) == pytest.approx(2.0 * math.sqrt(0.1), rel=1e-9)
+    assert tv_weight_at(max_iters, 1.0, 0.1, max_iters) == pytest.approx(0.1, rel=1e-9)
+    # Past an lr reset (upsample at 3000) the lr restarts at 1, the TV weight does not.
+    assert lr_scale_at(3000, [3000], 0.1, max_iters) == 1.0
+    assert tv_weight_at(3000, 1.0, 0.1, max_iters) == pytest.approx(0.1**0.3, rel=1e-9)
+    assert all(tv_weight_at(s, 1.0, 1.0, max_iters) == 1.0 for s in (0, 5000, max_iters)), "ratio 1: no decay"
 
 
 def test_l1_weight_switch() -> None:

@@ -58,12 +58,13 @@ def raw(data: Path, *flags: str, method: str = "fourierf-vm") -> TrainerConfig:
 
 def without_decisions(config: TrainerConfig) -> dict:
     """The config as data, less what ``finalize`` decides (scene and output folders made absolute, preset name,
-    effects, the run's size)."""
+    effects, the run's size, the TV decay)."""
     data = to_dict(config)
     data.pop("max_num_iterations")
     data["pipeline"]["datamanager"].pop("rays_per_batch")
     data["pipeline"]["model"]["field"].pop("n_voxels_init")
     data["pipeline"]["model"]["field"].pop("n_voxels_final")
+    data["pipeline"]["model"].pop("tv_decay_ratio")
     data["pipeline"]["datamanager"]["dataparser"].pop("data")
     data.pop("data")
     data.pop("output_dir")
@@ -159,6 +160,25 @@ def test_a_methods_own_effect_setting_wins_over_the_declaration() -> None:
     config, _ = finalize(raw(TINY_SCENE, method="fourierf-vm-code"))
     assert BLENDER_DECLARATION.view_dependent is False
     assert config.pipeline.effects.effects().view_dependent is True
+
+
+@pytest.mark.parametrize(
+    ("method", "flags", "expected"),
+    [
+        ("fourierf-vm", [], 0.1),  # TensoRF's lr decay, so TensoRF's TV decay
+        ("tensorf-vm", [], 0.1),
+        ("fourierf-vm-code", [], 1.0),  # the official code decays nothing
+        ("fourierf-vm", ["--optimizer.lr-decay-ratio", "0.3"], 0.3),
+        ("fourierf-vm", ["--pipeline.model.tv-decay-ratio", "0.5"], 0.5),  # the user's value wins
+        ("fourierf-vm-code", ["--pipeline.model.tv-decay-ratio", "0.1"], 0.1),
+    ],
+)
+def test_the_tv_decay_follows_the_optimisers_lr_decay_unless_given(method: str, flags: list, expected: float) -> None:
+    given = raw(TINY_SCENE, *flags, method=method)
+    if "--pipeline.model.tv-decay-ratio" not in flags:
+        assert given.pipeline.model.tv_decay_ratio is None, "the preset leaves it to the optimiser's decay"
+    config, _ = finalize(given)
+    assert config.pipeline.model.tv_decay_ratio == expected
 
 
 # -- resume_config ----------------------------------------------------------------------------------------------------

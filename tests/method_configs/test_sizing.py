@@ -4,15 +4,19 @@ the cost printed before training (``engine.estimates``)."""
 from __future__ import annotations
 
 import copy
+import sys
 
 import pytest
 import torch
 
+from fourierf_plugin.data.parsers.llff import NDC_BOX
 from fourierf_plugin.engine.estimates import checkpoint_bytes, describe_cost, estimate_seconds
+from fourierf_plugin.field_components.schedules import n_to_reso
 from fourierf_plugin.method_configs import all_methods, finalize
 from fourierf_plugin.method_configs.sizing import CPU_SIDE, GPU, run_size
 from fourierf_plugin.scripts.train import parse_args
 from tests.helpers import TINY_SCENE
+from tests.scenes import write_llff_scene
 
 CPU, CUDA = torch.device("cpu"), torch.device("cuda")
 
@@ -53,3 +57,27 @@ def test_cost_estimates_scale_with_the_run() -> None:
     line = describe_cost(config, 40000, threads=2, cpu=True)
     assert "MB each, the last 3 kept" in line and "estimated training time" in line
     assert "estimated" not in describe_cost(config, 40000, threads=2, cpu=False)
+
+
+def test_a_forward_facing_scene_on_a_gpu_gets_tensorfs_llff_grid() -> None:
+    """TensoRF's LLFF config: N_voxel_init 2097156 ≈ 128³, which on the NDC box is its 141×157×94, and 640³ final."""
+    size = run_size(3, 378, 504, CUDA, forward_facing=True)
+    assert (size.iterations, size.rays_per_batch) == (GPU["iterations"], GPU["rays_per_batch"])
+    assert (size.n_voxels_init, size.n_voxels_final) == (128**3, 640**3)
+    assert n_to_reso(size.n_voxels_init, [b - a for a, b in zip(*NDC_BOX, strict=True)]) == [141, 157, 94]
+    assert "TensoRF's LLFF final grid 640³" in size.reason
+    assert run_size(3, 378, 504, CPU, forward_facing=True) == run_size(3, 378, 504, CPU), "CPU: the pixel rule"
+
+
+def test_finalize_gives_a_forward_facing_scene_on_a_gpu_the_llff_grid(monkeypatch, tmp_path) -> None:
+    monkeypatch.setattr(sys.modules["fourierf_plugin.method_configs.finalize"], "pick_device", lambda _: CUDA)
+    scene = write_llff_scene(tmp_path / "scene")
+    given = parse_args(["fourierf-vm", "--data", str(scene), "llff-data", "--num-views", "3"])
+    config, notes = finalize(given)
+    assert config.pipeline.model.field.n_voxels_final == 640**3 and config.pipeline.model.field.n_voxels_init == 128**3
+    assert any("TensoRF's LLFF final grid 640³" in n and "n_voxels_final=262144000" in n for n in notes)
+    flags = ["--pipeline.model.field.n-voxels-final", str(200**3), "llff-data", "--num-views", "3"]
+    config, _ = finalize(parse_args(["fourierf-vm", "--data", str(scene), *flags]))
+    assert config.pipeline.model.field.n_voxels_final == 200**3, "a flag always wins"
+    blender, _ = finalize(parse_args(["fourierf-vm", "--data", str(TINY_SCENE)]))
+    assert blender.pipeline.model.field.n_voxels_final == 300**3, "a bounded scene keeps the paper's grid"

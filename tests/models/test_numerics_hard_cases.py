@@ -517,7 +517,7 @@ def test_regularisers_on_an_empty_mask_are_finite() -> None:
 
 def test_zero_ray_batch_gives_finite_losses() -> None:
     sigma = torch.zeros(0, 32, requires_grad=True)
-    assert math.isfinite(float(occlusion_penalty(sigma, 20 / 128).detach()))
+    assert math.isfinite(float(occlusion_penalty(sigma, 20 / 128, 1.0).detach()))
     assert math.isfinite(float(losses.mse(torch.zeros(0, 3), torch.zeros(0, 3))))
 
 

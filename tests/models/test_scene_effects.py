@@ -173,17 +173,44 @@ def parallel_ndc_rays(n: int, seed: int = 1) -> tuple[torch.Tensor, torch.Tensor
 def test_occlusion_penalty_sums_the_first_m_samples(k: int, m: int) -> None:
     sigma = torch.arange(3 * k, dtype=torch.float64).reshape(3, k) / k
     expected = sigma[:, :m].sum(dim=-1).mean() / k  # = mean over rays and all K samples of σ_k 1[k < M]
-    torch.testing.assert_close(occlusion_penalty(sigma, 20 / 128), expected)
+    torch.testing.assert_close(occlusion_penalty(sigma, 20 / 128, 1.0), expected)
     masked = sigma * (torch.arange(k) < m)
-    torch.testing.assert_close(occlusion_penalty(sigma, 20 / 128), masked.mean())
+    torch.testing.assert_close(occlusion_penalty(sigma, 20 / 128, 1.0), masked.mean())
 
 
 def test_occlusion_penalty_ignores_samples_past_m() -> None:
     sigma = torch.zeros(4, 128)
     sigma[:, 20:] = 100.0
-    assert occlusion_penalty(sigma, 20 / 128).item() == 0.0
+    assert occlusion_penalty(sigma, 20 / 128, 1.0).item() == 0.0
     sigma[:, 19] = 128.0
-    assert occlusion_penalty(sigma, 20 / 128).item() == pytest.approx(1.0)
+    assert occlusion_penalty(sigma, 20 / 128, 1.0).item() == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("distance_scale", [1.0, 2.5, 25.0])
+def test_occlusion_penalty_is_on_freenerfs_sigma(distance_scale: float) -> None:
+    """FreeNeRF composites 1 - exp(-σ_F δ), this pipeline 1 - exp(-distance_scale σ δ): the term is on σ_F, linear in
+    the distance scale, so at the default 25 it is 25 times the term on the raw σ."""
+    sigma = torch.rand(5, 128, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    raw = occlusion_penalty(sigma, 20 / 128, 1.0)
+    torch.testing.assert_close(occlusion_penalty(sigma, 20 / 128, distance_scale), distance_scale * raw)
+    empty = occlusion_penalty(torch.zeros(0, 128, requires_grad=True), 20 / 128, distance_scale)
+    assert empty.item() == 0.0 and empty.requires_grad, "no rays: 0 with a graph, not NaN"
+
+
+def test_the_models_occlusion_term_follows_its_distance_scale() -> None:
+    """Same σ (same seeded jitter), twice the distance scale: twice the occlusion term; 25× the raw-σ term at 25."""
+    field = FieldConfig(n_voxels_init=4096, n_voxels_final=13824, density_activation="relu")
+    terms, sigmas = [], []
+    for scale in (25.0, 50.0):
+        model = ndc_model(FourieRFModelConfig(field=field, distance_scale=scale))
+        march = model.march
+        model.march = lambda samples, march=march: sigmas.append(march(samples)) or sigmas[-1]  # type: ignore[method-assign]
+        model.prepare(0)
+        terms.append(model.train()(*parallel_ndc_rays(16))["occlusion"])
+    torch.testing.assert_close(sigmas[0], sigmas[1])
+    assert terms[0].item() > 0, "precondition: the fresh field has density in front of the cameras"
+    torch.testing.assert_close(terms[1], 2 * terms[0])
+    torch.testing.assert_close(terms[0], 25.0 * occlusion_penalty(sigmas[0], 20 / 128, 1.0))
 
 
 def test_occlusion_penalty_weight_in_the_loss(tmp_path: Path, llff_scene: Path) -> None:

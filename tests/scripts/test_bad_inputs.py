@@ -324,6 +324,10 @@ CASES: dict[str, Case] = {
         (f"{MODEL}.field.upsample-fractions 0.01 0.02", "at least 100 here"),
     ),
     "train: AdamW beta >= 1": Case("train", train_with("--optimizer.betas", "1.5", "0.9"), ("--optimizer.betas 1.5",)),
+    "train: AdamW beta after a reset >= 1": Case(
+        "train", train_with("--optimizer.betas-after-reset", "0.9", "1.0"), ("--optimizer.betas-after-reset 0.9 1.0",)
+    ),
+    "train: TV decay ratio <= 0": out_of_range(f"{MODEL}.tv-decay-ratio", "0", "> 0"),
     # -- train: resuming ---------------------------------------------------------------------------------------------
     "train: resume a config from another version": Case(
         "train",

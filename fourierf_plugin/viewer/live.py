@@ -28,8 +28,8 @@ if TYPE_CHECKING:
     from fourierf_plugin.models.fourierf import FourieRFModel
     from fourierf_plugin.pipelines.base import Pipeline
 
-LIVE_SETTINGS = ViewerSettings(preview_side=128, final_side=384)
-"""Smaller pictures than for a saved run: every render second is taken from training."""
+LIVE_SETTINGS = ViewerSettings(preview_side=128, final_side=384, render_threads=1)
+"""Smaller pictures than for a saved run, rendered on one core: every render second is taken from training."""
 
 
 def snapshot(model: FourieRFModel) -> dict[str, Tensor]:

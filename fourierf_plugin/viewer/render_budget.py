@@ -35,3 +35,38 @@ class RenderBudget:
         self.spent_seconds += seconds
         if self.max_share is not None:
             self._next_allowed = max(self._next_allowed, started + seconds / self.max_share)
+
+
+class PreviewPacer:
+    """Picks how many pixels a preview renders so that it takes about ``target_seconds``.
+
+    A preview's time is about proportional to its rays, and what a ray costs depends on the machine, its load (a
+    browser or a training run on the same cores) and the view; so the cost per ray is learnt from the previews
+    already rendered (the mean of the last estimate and the newest) and each preview renders the share of each side
+    that fits the target, between ``min_scale`` and 1, scaled up to the preview size afterwards."""
+
+    def __init__(self, target_seconds: float, min_scale: float = 0.25, first_scale: float = 0.5) -> None:
+        if not target_seconds > 0:
+            raise ValueError(f"target_seconds must be > 0, got {target_seconds}")
+        if not 0 < min_scale <= first_scale <= 1:
+            raise ValueError(f"need 0 < min_scale <= first_scale <= 1, got {min_scale} and {first_scale}")
+        self.target_seconds = target_seconds
+        self.min_scale = min_scale
+        self.first_scale = first_scale
+        self.seconds_per_ray: float | None = None
+
+    def render_size(self, width: int, height: int) -> tuple[int, int]:
+        """(width, height) to render for a preview shown at ``width`` × ``height``."""
+        if self.seconds_per_ray is None:
+            scale = self.first_scale
+        else:
+            fit = (self.target_seconds / (self.seconds_per_ray * width * height)) ** 0.5
+            scale = min(1.0, max(self.min_scale, fit))
+        return max(1, round(width * scale)), max(1, round(height * scale))
+
+    def observe(self, rays: int, seconds: float) -> None:
+        """A preview of ``rays`` rays took ``seconds``."""
+        if rays <= 0 or seconds <= 0:
+            return
+        newest = seconds / rays
+        self.seconds_per_ray = newest if self.seconds_per_ray is None else 0.5 * (self.seconds_per_ray + newest)

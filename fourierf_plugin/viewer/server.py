@@ -12,16 +12,25 @@ import collections
 import importlib
 import threading
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING
 
+import torch
+
 from fourierf_plugin.exporter.marching_cubes import describe, export_field_mesh
 from fourierf_plugin.utils.console import get_console, warn
 from fourierf_plugin.utils.errors import UserError, fail
-from fourierf_plugin.viewer.render_budget import RenderBudget
-from fourierf_plugin.viewer.render_service import OUTPUTS, Output, camera_from_opencv_pose, render_view
+from fourierf_plugin.viewer.render_budget import PreviewPacer, RenderBudget
+from fourierf_plugin.viewer.render_service import (
+    OUTPUTS,
+    Output,
+    PreviewQuality,
+    camera_from_opencv_pose,
+    render_view,
+)
 from fourierf_plugin.viewer.scene_view import add_test_views, build_scene
 from fourierf_plugin.viewer.viewed_run import ViewedRun
 
@@ -67,6 +76,14 @@ class ViewerSettings:
     rest_seconds: float = 0.3
     """How long the camera must stay still before the final picture is rendered."""
     jpeg_quality: int = 90
+    preview_seconds: float = 0.25
+    """What a preview's render should take: it renders as many of its pixels as fit (at least a quarter of each
+    side, learnt from the previews before it) and is scaled up to the preview size."""
+    preview_quality: PreviewQuality | None = field(default_factory=PreviewQuality)
+    """The cheaper marching of previews (None: previews march as the final picture does)."""
+    render_threads: int | None = None
+    """Torch threads of the render thread (None: torch's default, every core). The live viewer uses 1, so a render
+    never takes more than one core from training."""
 
 
 @dataclass(frozen=True)
@@ -79,6 +96,9 @@ class RenderRecord:
     width: int
     height: int
     render_seconds: float
+    render_width: int = 0
+    """Pixels the model rendered across (a preview may render fewer and be scaled up to ``width``)."""
+    render_height: int = 0
 
 
 @dataclass
@@ -114,11 +134,14 @@ class ViewerServer:
         test: DataparserOutputs | None,
         settings: ViewerSettings | None = None,
         budget: RenderBudget | None = None,
+        clock: Callable[[], float] = time.perf_counter,
     ) -> None:
         self.server = server
         self.viewed = viewed
         self.settings = settings or ViewerSettings()
         self.budget = budget or RenderBudget(None)
+        self.pacer = PreviewPacer(self.settings.preview_seconds)
+        self.clock = clock
         self._clients: dict[int, _ClientView] = {}
         self._lock = threading.Lock()
         self._wake = threading.Event()
@@ -175,7 +198,7 @@ class ViewerServer:
         with self._lock:
             self._generation += 1
             if moving:
-                self._changed_at = time.perf_counter()
+                self._changed_at = self.clock()
         self._wake.set()
 
     def follow_run_cutoffs(self) -> None:
@@ -214,18 +237,23 @@ class ViewerServer:
 
     # -- clients ----------------------------------------------------------------------------------------------------
     def connect(self, client: viser.ClientHandle) -> None:
-        """Start drawing for a browser (viser calls this for each one that connects)."""
-        view = _ClientView(client)
-        with self._lock:
-            self._clients[client.client_id] = view
+        """Start drawing for a browser (viser calls this for each one that connects).
+
+        viser registers a browser once its first camera message has arrived, and runs this callback on its thread
+        pool, possibly after that message's camera callbacks ran (without ``moved``, not yet registered): so the
+        camera counts as reported from here on, not from the next message, which a browser left alone never sends."""
+        view = _ClientView(client, camera_generation=1, moved_at=self.clock())
 
         def moved(_: object) -> None:
             with self._lock:
                 view.camera_generation += 1
-                view.moved_at = time.perf_counter()
+                view.moved_at = self.clock()
             self._wake.set()
 
         client.camera.on_update(moved)
+        with self._lock:
+            self._clients[client.client_id] = view
+        self._wake.set()
 
     def _disconnected(self, client: viser.ClientHandle) -> None:
         with self._lock:
@@ -238,16 +266,24 @@ class ViewerServer:
 
     # -- rendering --------------------------------------------------------------------------------------------------
     def _next_job(self) -> tuple[_ClientView, tuple[int, int], bool] | None:
-        """A browser whose picture is out of date, the state to render, and whether at the final size."""
-        now = time.perf_counter()
+        """A browser whose picture is out of date, the state to render, and whether at the final size.
+
+        Every camera move is answered by a preview first: the final size only once the camera has rested *and*
+        the screen already shows this camera (at some state of the controls). Without the second condition a move
+        whose preview was abandoned (the browser reported the camera again during it, as it does right after a
+        move) went straight to the final picture once the rest time had passed during the abandoned render: many
+        times a preview's time, and no preview at all for that move."""
+        now = self.clock()
         with self._lock:
             for view in self._clients.values():
                 if view.camera_generation == 0:
                     continue  # no camera reported yet
                 key = (view.camera_generation, self._generation)
                 rested = now - max(view.moved_at, self._changed_at) >= self.settings.rest_seconds
-                if key != view.shown or (rested and not view.shown_final):
-                    return view, key, rested
+                camera_shown = view.shown is not None and view.shown[0] == view.camera_generation
+                final = rested and camera_shown
+                if key != view.shown or (final and not view.shown_final):
+                    return view, key, final
         return None
 
     def _outdated(self, view: _ClientView, key: tuple[int, int]) -> bool:
@@ -255,11 +291,13 @@ class ViewerServer:
         return (view.camera_generation, self._generation) != key or self._stop.is_set()
 
     def _render_loop(self) -> None:
+        if self.settings.render_threads is not None:
+            torch.set_num_threads(self.settings.render_threads)  # per thread: training keeps its own count
         while not self._stop.is_set():
+            self._wake.clear()  # before looking: a wake-up set after this is seen by the wait below
             job = self._next_job()
             if job is None:
-                self._wake.wait(0.05)
-                self._wake.clear()
+                self._wake.wait(0.05)  # the timeout: a camera at rest becomes due for its final picture
                 continue
             wait = self.budget.wait_seconds()
             if wait > 0:
@@ -284,18 +322,30 @@ class ViewerServer:
         side = int(self.final_slider.value if final else self.preview_slider.value)
         pose = camera_from_opencv_pose(camera.wxyz, camera.position, camera.fov, camera.aspect, side)
         output: Output = self.output.value  # type: ignore[assignment]
+        quality = None if final else self.settings.preview_quality
+        size = (pose.width, pose.height) if final else self.pacer.render_size(pose.width, pose.height)
         started = time.perf_counter()
         with self.viewed.lock:
-            rendered = render_view(self.viewed.model, pose, self.cutoffs(), abort=lambda: self._outdated(view, key))
+            rendered = render_view(
+                self.viewed.model,
+                pose,
+                self.cutoffs(),
+                abort=lambda: self._outdated(view, key),
+                quality=quality,
+                render_size=size,
+            )
         self.budget.charge(started, time.perf_counter() - started)
         if rendered is None:
-            return  # the camera or a control moved during the render: the next job starts with a preview
+            return  # the camera or a control moved during the render: the next job is a preview (``_next_job``)
+        if not final:
+            self.pacer.observe(size[0] * size[1], rendered.seconds)
         view.client.scene.set_background_image(
             rendered.image(output), format="jpeg", jpeg_quality=self.settings.jpeg_quality
         )
         with self._lock:
             view.shown, view.shown_final = key, final
-        self.log.append(RenderRecord(time.perf_counter(), final, pose.width, pose.height, rendered.seconds))
+        record = RenderRecord(time.perf_counter(), final, pose.width, pose.height, rendered.seconds, size[0], size[1])
+        self.log.append(record)
         self.last_render_seconds = rendered.seconds
         self.renders += 1
         self.final_renders += int(final)

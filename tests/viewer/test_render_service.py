@@ -10,10 +10,11 @@ import torch
 
 from fourierf_plugin.data.datamanager import camera_rays
 from fourierf_plugin.engine.trainer import Trainer
-from fourierf_plugin.viewer.render_budget import RenderBudget
+from fourierf_plugin.viewer.render_budget import PreviewPacer, RenderBudget
 from fourierf_plugin.viewer.render_service import (
     OPENCV_TO_OPENGL,
     RAYS_PER_BLOCK,
+    PreviewQuality,
     camera_from_dataset,
     camera_from_opencv_pose,
     fit_size,
@@ -154,3 +155,56 @@ def test_mesh_names_never_overwrite_an_earlier_export(tmp_path: Path) -> None:
     first.write_text("x")
     second = unique_mesh_path(tmp_path, 0.05)
     assert second.name == "viewer-f0.050-2.ply"
+
+
+# -- previews ---------------------------------------------------------------------------------------------------------
+def _psnr(a: np.ndarray, b: np.ndarray) -> float:
+    mse = float(((a.astype(float) - b.astype(float)) ** 2).mean())
+    return 10 * np.log10(255.0**2 / max(mse, 1e-9))
+
+
+def test_a_preview_marches_cheaper_scales_up_and_leaves_the_final_render_unchanged(trained_run) -> None:
+    trainer, _ = trained_run
+    model = trainer.pipeline.model
+    camera = camera_from_dataset(_test_cameras(trainer), 0)
+    cutoffs = model.cutoffs(model.max_iters)
+    own_config = model.config
+    final = render_view(model, camera, cutoffs)
+    quick = render_view(model, camera, cutoffs, quality=PreviewQuality())
+    half = (camera.width // 2, camera.height // 2)
+    small = render_view(model, camera, cutoffs, quality=PreviewQuality(), render_size=half)
+    assert model.config is own_config  # the preview's marching is undone
+    again = render_view(model, camera, cutoffs)
+    assert np.array_equal(again.rgb, final.rgb) and np.array_equal(again.depth, final.depth)
+    assert final.rendered_size is None and small.rendered_size == half
+    for picture in (quick, small):
+        assert picture.rgb.shape == picture.depth.shape == picture.accumulation.shape == final.rgb.shape
+    assert not np.array_equal(quick.rgb, final.rgb)  # a coarser step changes the picture a little ...
+    assert _psnr(quick.rgb, final.rgb) > 30.0  # ... only a little
+    assert _psnr(small.rgb, final.rgb) > 20.0  # half the pixels, scaled up: blurrier, the same picture
+
+
+def test_preview_settings_are_restored_when_the_render_is_abandoned(trained_run) -> None:
+    trainer, _ = trained_run
+    model = trainer.pipeline.model
+    own_config = model.config
+    camera = camera_from_dataset(_test_cameras(trainer), 0)
+    assert render_view(model, camera, (1.0, 1.0), abort=lambda: True, quality=PreviewQuality()) is None
+    assert model.config is own_config
+
+
+def test_the_pacer_renders_as_many_pixels_as_fit_the_preview_time() -> None:
+    pacer = PreviewPacer(0.2, min_scale=0.25, first_scale=0.5)
+    assert pacer.render_size(256, 256) == (128, 128)  # nothing learnt yet
+    pacer.observe(128 * 128, 0.8)  # four times the target: a quarter of these rays would fit ...
+    assert pacer.render_size(256, 256) == (64, 64)  # ... half of each side
+    pacer.observe(64 * 64, 0.05)  # now 4x faster per ray (a browser stopped drawing): the mean of the two, ...
+    assert pacer.render_size(256, 256) == (81, 81)  # ... 2 s per 256², so sqrt(0.1) of each side
+    fast = PreviewPacer(0.2)
+    fast.observe(100, 1e-6)
+    assert fast.render_size(256, 128) == (256, 128)  # never more than the preview's own pixels
+    slow = PreviewPacer(0.2)
+    slow.observe(100, 100.0)
+    assert slow.render_size(256, 128) == (64, 32)  # never less than min_scale of each side
+    with pytest.raises(ValueError, match="target_seconds"):
+        PreviewPacer(0.0)

@@ -1,0 +1,148 @@
+"""The viewer's render thread, driven step by step: a stand-in ``render_view`` blocks until the test lets it finish,
+and a fake clock decides when the camera has rested, so each test fixes the order of camera moves and renders."""
+
+from __future__ import annotations
+
+import queue
+import threading
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+import torch
+
+from fourierf_plugin.viewer import server as server_module
+from fourierf_plugin.viewer.render_service import Rendered, ViewCamera
+from fourierf_plugin.viewer.server import ViewerServer, ViewerSettings, open_server
+from fourierf_plugin.viewer.viewed_run import ViewedRun
+from tests.conftest import require_module
+from tests.helpers import FakeClock
+from tests.viewer.fake_client import FakeClient
+
+GUARD_S = 20.0
+"""Only a failing test ever waits this long (for a render the thread should have started)."""
+
+
+@dataclass
+class Call:
+    """One render the thread asked for: its size, whether a preview, and the test's hand on when it ends."""
+
+    camera: ViewCamera
+    preview: bool
+    abort: object
+    threads: int
+    release: threading.Event
+
+
+class ScriptedRenders:
+    """Replaces ``render_view`` in the server: each call is queued for the test and waits to be released; released,
+    it honours ``abort`` as the real one does between blocks."""
+
+    def __init__(self) -> None:
+        self.calls: queue.Queue[Call] = queue.Queue()
+        self.closed = threading.Event()
+
+    def __call__(self, model, camera, cutoffs, abort=None, quality=None, render_size=None):
+        if self.closed.is_set():
+            return None
+        call = Call(camera, quality is not None, abort, torch.get_num_threads(), threading.Event())
+        self.calls.put(call)
+        if self.closed.is_set():
+            call.release.set()
+        assert call.release.wait(GUARD_S), "the test never released the render"
+        if abort is not None and abort():
+            return None
+        blank = np.zeros((camera.height, camera.width, 3), dtype=np.uint8)
+        return Rendered(blank, blank, blank, 0.01)
+
+    def next(self) -> Call:
+        try:
+            return self.calls.get(timeout=GUARD_S)
+        except queue.Empty:
+            pytest.fail("the render thread started no render")
+
+    def none_pending(self) -> bool:
+        return self.calls.empty()
+
+
+@pytest.fixture
+def page(trained_run, monkeypatch) -> Iterator[tuple[ViewerServer, ScriptedRenders, FakeClock]]:
+    require_module("viser", "the viewer needs viser (pip install '.[viewer]')")
+    trainer, run_dir = trained_run
+    renders = ScriptedRenders()
+    monkeypatch.setattr(server_module, "render_view", renders)
+    clock = FakeClock()
+    pipeline = trainer.pipeline
+    viewed = ViewedRun(pipeline.model, pipeline.model.max_iters, run_dir)
+    settings = ViewerSettings(preview_side=64, final_side=128, render_threads=1)
+    server = open_server(0, "127.0.0.1")
+    view = ViewerServer(server, viewed, pipeline.datamanager.reference_outputs, None, settings, clock=clock)
+    try:
+        yield view, renders, clock
+    finally:
+        renders.closed.set()
+        for call in list(renders.calls.queue):
+            call.release.set()
+        view.stop()
+
+
+def _finish(call: Call, view: ViewerServer) -> None:
+    """Let a render end and wait until its picture is on the (fake) screen."""
+    client = view._clients[1].client
+    client.scene.received.clear()
+    call.release.set()
+    assert client.scene.received.wait(GUARD_S), "the released render sent no picture"
+
+
+def test_a_browser_is_drawn_from_the_camera_it_connected_with(page) -> None:
+    """viser runs the connect callback after the first camera message, whose camera callbacks then missed the
+    viewer: before the fix nothing was drawn until the browser happened to report its camera again."""
+    view, renders, clock = page
+    view.connect(FakeClient())  # no camera message follows
+    first = renders.next()
+    assert first.preview and max(first.camera.width, first.camera.height) == 64
+    _finish(first, view)
+    clock.now += 1.0  # the camera has rested
+    final = renders.next()
+    assert not final.preview and max(final.camera.width, final.camera.height) == 128
+    _finish(final, view)
+
+
+def test_a_move_answered_during_an_abandoned_preview_still_gets_a_preview(page, trained_run) -> None:
+    """The dropped preview of the latency benchmark: a browser reports its camera again right after a move; the
+    preview under way is abandoned, and by then the camera has 'rested' longer than the rest time. The next picture
+    must still be a preview (before the fix it was the final one: seconds later, and no preview for the move)."""
+    view, renders, clock = page
+    trainer, _ = trained_run
+    cameras = trainer.pipeline.datamanager.reference_outputs.cameras
+    client = FakeClient()
+    view.connect(client)
+    _finish(renders.next(), view)
+    clock.now += 1.0
+    _finish(renders.next(), view)  # the final picture: the page is at rest
+
+    client.camera.move_to(cameras, 1)  # the move
+    preview = renders.next()
+    assert preview.preview
+    client.camera.move_to(cameras, 2)  # the browser's second report of it, during the preview
+    clock.now += 1.0  # the preview takes longer than the rest time
+    preview.release.set()  # it sees the camera moved and is abandoned
+    answer = renders.next()
+    assert answer.preview, "the move was answered with the final picture, never with a preview"
+    _finish(answer, view)
+    clock.now += 1.0
+    final = renders.next()
+    assert not final.preview
+    _finish(final, view)
+    assert renders.none_pending()
+
+
+def test_the_render_thread_uses_its_own_thread_count(page) -> None:
+    view, renders, _ = page
+    before = torch.get_num_threads()
+    view.connect(FakeClient())
+    call = renders.next()
+    assert call.threads == 1  # ViewerSettings.render_threads
+    _finish(call, view)
+    assert torch.get_num_threads() == before  # this thread's count is untouched

@@ -16,6 +16,7 @@ from fourierf_plugin.data.scene_effects import EffectsConfig
 from fourierf_plugin.engine.loading import locate_data
 from fourierf_plugin.engine.machine import pick_device
 from fourierf_plugin.engine.trainer import TrainerConfig
+from fourierf_plugin.method_configs.budget import apply_budget_rule
 from fourierf_plugin.method_configs.registry import all_methods
 from fourierf_plugin.method_configs.scene_presets import apply_real_scene_preset, apply_settings
 from fourierf_plugin.method_configs.sizing import run_size
@@ -60,6 +61,7 @@ def finalize(config: TrainerConfig) -> tuple[TrainerConfig, list[str]]:
             notes.append(f"  kept your settings for: {', '.join(kept)}")
     config.scene_preset = preset
     notes += size_the_run(config, all_methods.get(config.method_name), not declared.bounded)
+    notes += apply_budget_rule(config, all_methods.get(config.method_name))
     resolve_tv_decay(config)
     effects = config.pipeline.effects.resolve(declared)
     config.pipeline.effects = EffectsConfig.of(effects)

@@ -92,6 +92,7 @@ def _trainer(
 
 
 fourierf_vm = _trainer("fourierf-vm", _vm_model(fourier=True))
+fourierf_vm_paper = replace(_trainer("fourierf-vm-paper", _vm_model(fourier=True)), budget_rule=False)
 fourierf_cp = _trainer("fourierf-cp", _cp_model(fourier=True))
 fourierf_vm_code = _trainer(
     "fourierf-vm-code",
@@ -106,6 +107,7 @@ zerorf_vm = _trainer("zerorf-vm", _zerorf_model(), _zerorf_optimizer(), EffectsC
 
 descriptions = {
     "fourierf-vm": "FourieRF, VM field (planes x lines), the paper's synthetic preset.",
+    "fourierf-vm-paper": "FourieRF with the paper's values at any budget (no short-run rule; README, Presets).",
     "fourierf-cp": "FourieRF with the CP field (lines only).",
     "fourierf-vm-code": "FourieRF as the official code ships it (f0 0.01 over the whole run, no weight decay).",
     "tensorf-vm": "Baseline: the same pipeline with the Fourier masks off (TensoRF VM).",

@@ -16,6 +16,7 @@ from fourierf_plugin.method_configs.presets import (
     fourierf_cp,
     fourierf_vm,
     fourierf_vm_code,
+    fourierf_vm_paper,
     tensorf_cp,
     tensorf_vm,
     zerorf_vm,
@@ -24,6 +25,7 @@ from fourierf_plugin.method_configs.presets import (
 all_methods: dict[str, TrainerConfig] = {
     "fourierf-vm": fourierf_vm,
     "fourierf-cp": fourierf_cp,
+    "fourierf-vm-paper": fourierf_vm_paper,
     "fourierf-vm-code": fourierf_vm_code,
     "tensorf-vm": tensorf_vm,
     "tensorf-cp": tensorf_cp,

@@ -339,3 +339,6 @@ class TrainerConfig(InstantiateConfig):
     """With --vis tensorboard: render one training and one held-out view every N iterations."""
     scene_preset: Literal["auto", "synthetic", "real"] = "auto"
     """Synthetic or real-scene settings; auto picks real for forward-facing scenes (flags you set always win)."""
+    budget_rule: bool = True
+    """Runs shorter than the paper's 10k iterations get the values chosen on validation views for short runs
+    (README, Presets); False keeps the preset's values at any budget."""

@@ -58,13 +58,15 @@ def raw(data: Path, *flags: str, method: str = "fourierf-vm") -> TrainerConfig:
 
 def without_decisions(config: TrainerConfig) -> dict:
     """The config as data, less what ``finalize`` decides (scene and output folders made absolute, preset name,
-    effects, the run's size, the TV decay)."""
+    effects, the run's size, the TV decay, the budget rule's values)."""
     data = to_dict(config)
     data.pop("max_num_iterations")
     data["pipeline"]["datamanager"].pop("rays_per_batch")
     data["pipeline"]["model"]["field"].pop("n_voxels_init")
     data["pipeline"]["model"]["field"].pop("n_voxels_final")
     data["pipeline"]["model"].pop("tv_decay_ratio")
+    data["optimizer"].pop("weight_decay")
+    data["optimizer"].pop("lr_grids")
     data["pipeline"]["datamanager"]["dataparser"].pop("data")
     data.pop("data")
     data.pop("output_dir")
@@ -86,7 +88,8 @@ def test_blender_scene_keeps_the_synthetic_preset_and_gets_its_declared_effects(
     assert without_decisions(config) == without_decisions(given), "a bounded scene changes no setting"
     assert config.pipeline.effects == EffectsConfig.of(BLENDER_DECLARATION)
     assert notes[0].startswith("run size for 4 view(s) of 100x100 on cpu: ")
-    assert notes[1:] == [
+    assert notes[1].startswith("budget rule (800 < 10000 iterations): weight_decay=0.0")
+    assert notes[2:] == [
         "scene effects: background=white, rays=euclidean, view-dependent=no, occlusion-regularisation=no "
         "(the scene declares: background=white, rays=euclidean, view-dependent=no, occlusion-regularisation=no, "
         "bounded)"

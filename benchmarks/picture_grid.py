@@ -1,0 +1,67 @@
+"""A picture grid of held-out views: ground truth | one run | another run, RGB above depth and accumulation.
+
+Why: a PSNR says how far the renders are, not what is wrong with them. Ghosting on a forward-facing scene shows as
+doubled edges in RGB, and in depth as geometry at two distances or a layer of density hanging in front of the
+cameras (floaters); accumulation below 1 shows where a run left space empty. Depth uses one range per view for all
+runs (the first run's 1-99 percentiles), so the same colour is the same distance in every column.
+
+    python benchmarks/picture_grid.py --runs A/config.json B/config.json --labels fourierf-vm tensorf-vm \
+        --output docs/fern_grid.png
+
+Each run is rendered in this process the way ``fourierf-eval`` renders it (its test split, or ``--split``).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+
+from fourierf_plugin.engine.loading import load_run
+from fourierf_plugin.method_configs import config_registry
+from fourierf_plugin.utils.colormaps import colorize_accumulation, colorize_depth, depth_range, to_uint8
+
+
+def columns(config: Path, split: str, views: int) -> list[dict]:
+    """The first ``views`` views of the split rendered as ``fourierf-eval`` renders them: rgb, target, depth and
+    accumulation."""
+    run = load_run(config, config_registry(), device="cpu")
+    out = []
+    for k, r in enumerate(run.pipeline.render_views(split, run.step)):
+        if k == views:
+            break
+        out.append({"name": r.view.name, "rgb": r.rgb, "target": r.target, "depth": r.depth, "acc": r.accumulation})
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--runs", type=Path, nargs="+", required=True, help="config.json of each run (one column each)")
+    ap.add_argument("--labels", nargs="+", required=True)
+    ap.add_argument("--split", default="test")
+    ap.add_argument("--views", type=int, default=2, help="how many of the split's views (rows of RGB/depth/acc)")
+    ap.add_argument("--output", type=Path, required=True)
+    args = ap.parse_args()
+    if len(args.labels) != len(args.runs):
+        raise SystemExit("error: give one --labels entry per --runs entry")
+    renders = [columns(config, args.split, args.views) for config in args.runs]
+    rows = []
+    for k in range(len(renders[0])):
+        rgb = [to_uint8(renders[0][k]["target"]), *[to_uint8(col[k]["rgb"]) for col in renders]]
+        blank = np.full_like(rgb[0], 255)
+        low, high = depth_range(renders[0][k]["depth"].numpy(), renders[0][k]["acc"].numpy())  # first run's range
+        depth = [colorize_depth(col[k]["depth"], col[k]["acc"], low, high) for col in renders]
+        acc = [colorize_accumulation(col[k]["acc"]) for col in renders]
+        rows += [np.concatenate(rgb, axis=1), np.concatenate([blank, *depth], axis=1)]
+        rows.append(np.concatenate([blank, *acc], axis=1))
+    names = [view["name"] for view in renders[0]]
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    iio.imwrite(args.output, np.concatenate(rows, axis=0))
+    heads = " | ".join(["ground truth", *args.labels])
+    print(f"wrote {args.output}: views {names}; columns {heads}; rows rgb, depth, accumulation")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,76 @@
+"""The budget rule (``method_configs/budget.py``): short runs get the val-chosen values, the paper's budget keeps the
+paper's, a flag always wins, and ``fourierf-vm-paper`` is the paper's at any budget."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from fourierf_plugin.method_configs import all_methods, finalize
+from fourierf_plugin.method_configs.budget import PAPER_ITERATIONS, SHORT_RUN_SETTINGS, short_run_settings
+from fourierf_plugin.scripts.train import parse_args
+from tests.helpers import TINY_SCENE
+from tests.scenes import write_llff_scene
+
+
+@pytest.fixture(scope="module")
+def llff_scene(tmp_path_factory) -> Path:
+    return write_llff_scene(tmp_path_factory.mktemp("llff") / "scene")
+
+
+def finished(method: str, data: Path, *flags: str):
+    parser = ["llff-data", "--num-views", "3"] if (data / "poses_bounds.npy").exists() else []
+    config, notes = finalize(parse_args([method, "--data", str(data), "--device", "cpu", *flags, *parser]))
+    return config, notes
+
+
+def test_rule_is_a_function_of_the_iteration_count() -> None:
+    assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS - 1) == {"optimizer.weight_decay": 0.0}
+    assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS) == {}
+    assert short_run_settings("fourierf-vm", "real", 800) == {"optimizer.lr_grids": 0.08}
+    assert short_run_settings("zerorf-vm", "real", 800) == {}
+    # the table is not handed out for mutation
+    short_run_settings("fourierf-vm", "real", 800)["optimizer.lr_grids"] = 1.0
+    assert SHORT_RUN_SETTINGS[("fourierf-vm", "real")]["optimizer.lr_grids"] == 0.08
+
+
+def test_cpu_run_of_an_object_drops_weight_decay_and_says_so() -> None:
+    config, notes = finished("fourierf-vm", TINY_SCENE)
+    assert config.max_num_iterations < PAPER_ITERATIONS
+    assert config.optimizer.weight_decay == 0.0
+    assert any(n.startswith("budget rule") and "weight_decay=0.0" in n for n in notes)
+
+
+def test_paper_budget_keeps_the_papers_values() -> None:
+    config, notes = finished("fourierf-vm", TINY_SCENE, "--max-num-iterations", str(PAPER_ITERATIONS + 2000))
+    assert config.optimizer.weight_decay == all_methods["fourierf-vm"].optimizer.weight_decay == 0.2
+    assert not any(n.startswith("budget rule") for n in notes)
+
+
+def test_a_flag_wins_over_the_rule() -> None:
+    config, notes = finished("fourierf-vm", TINY_SCENE, "--optimizer.weight-decay", "0.05")
+    assert config.optimizer.weight_decay == 0.05
+    assert not any(n.startswith("budget rule") for n in notes)
+
+
+def test_the_rule_can_be_turned_off() -> None:
+    config, notes = finished("fourierf-vm", TINY_SCENE, "--budget-rule", "False")
+    assert config.optimizer.weight_decay == 0.2
+    assert not any(n.startswith("budget rule") for n in notes)
+
+
+def test_paper_preset_keeps_the_papers_values_at_any_budget() -> None:
+    config, notes = finished("fourierf-vm-paper", TINY_SCENE)
+    assert config.max_num_iterations < PAPER_ITERATIONS
+    assert config.optimizer.weight_decay == 0.2
+    assert not any(n.startswith("budget rule") for n in notes)
+
+
+@pytest.mark.parametrize("method", ["fourierf-vm", "tensorf-vm"])
+def test_forward_facing_short_run_gets_the_faster_grid_rate(llff_scene: Path, method: str) -> None:
+    config, _ = finished(method, llff_scene)
+    assert config.scene_preset == "real"
+    assert config.optimizer.lr_grids == 0.08
+    long_run, _ = finished(method, llff_scene, "--max-num-iterations", str(PAPER_ITERATIONS + 2000))
+    assert long_run.optimizer.lr_grids == 0.02

@@ -19,6 +19,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
+from fourierf_plugin.accel.allocator import keep_freed_memory
 from fourierf_plugin.engine.loading import load_run
 from fourierf_plugin.method_configs import config_registry
 from fourierf_plugin.utils.colormaps import colorize_accumulation, colorize_depth, depth_range, to_uint8
@@ -44,6 +45,7 @@ def main() -> None:
     ap.add_argument("--views", type=int, default=2, help="how many of the split's views (rows of RGB/depth/acc)")
     ap.add_argument("--output", type=Path, required=True)
     args = ap.parse_args()
+    keep_freed_memory()  # as the console scripts do: renders reuse freed tensor memory instead of faulting it back
     if len(args.labels) != len(args.runs):
         raise SystemExit("error: give one --labels entry per --runs entry")
     renders = [columns(config, args.split, args.views) for config in args.runs]

@@ -254,7 +254,15 @@ def report(args: argparse.Namespace) -> list[str]:
                 ]
                 if vals != ["—", "—"]:
                     sweeps.append(f"| {scene} | {name} | {s} | " + " | ".join(vals) + " |")
-    body += [*summary, "", "Validation PSNR of every setting tried (the choice above is the best of each column):", ""]
+    body += [*summary, ""]
+    for m in METHODS:  # does quality hold as the budget grows? the same sizes and setting, 800 vs 3000 iterations
+        short, long = (rows_by(results, "fern", p, m).get("lr0.08", []) for p in ("pmid800", "pmid"))
+        if short and long:
+            body.append(
+                f"- fern, {m}, P-MID sizes, `lr0.08`, 800 → 3000 iterations: val {short[0]['val_psnr']:.2f} → "
+                f"{long[0]['val_psnr']:.2f}, test {short[0]['psnr']:.2f} → {long[0]['psnr']:.2f}"
+            )
+    body += ["", "Validation PSNR of every setting tried (the choice above is the best of each column):", ""]
     body += ["| scene | protocol | setting | fourierf-vm val | tensorf-vm val |", "|---|---|---|---|---|", *sweeps, ""]
     return body
 

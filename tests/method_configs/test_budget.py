@@ -26,9 +26,14 @@ def finished(method: str, data: Path, *flags: str):
 
 
 def test_rule_is_a_function_of_the_iteration_count() -> None:
-    assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS - 1) == {"optimizer.weight_decay": 0.0}
+    short = {"optimizer.weight_decay": 0.0, "optimizer.lr_decay_ratio": 1.0}
+    assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS - 1) == short
     assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS) == {}
-    assert short_run_settings("fourierf-vm", "real", 800) == {"optimizer.lr_grids": 0.08}
+    assert short_run_settings("fourierf-vm", "real", 800) == {
+        "optimizer.lr_grids": 0.08,
+        "pipeline.model.tv_decay_ratio": 1.0,
+    }
+    assert short_run_settings("tensorf-vm", "real", 800) == {"optimizer.lr_grids": 0.08}
     assert short_run_settings("zerorf-vm", "real", 800) == {}
     # the table is not handed out for mutation
     short_run_settings("fourierf-vm", "real", 800)["optimizer.lr_grids"] = 1.0
@@ -38,7 +43,8 @@ def test_rule_is_a_function_of_the_iteration_count() -> None:
 def test_cpu_run_of_an_object_drops_weight_decay_and_says_so() -> None:
     config, notes = finished("fourierf-vm", TINY_SCENE)
     assert config.max_num_iterations < PAPER_ITERATIONS
-    assert config.optimizer.weight_decay == 0.0
+    assert config.optimizer.weight_decay == 0.0 and config.optimizer.lr_decay_ratio == 1.0
+    assert config.pipeline.model.tv_decay_ratio == 1.0, "no lr decay: no TV decay either"
     assert any(n.startswith("budget rule") and "weight_decay=0.0" in n for n in notes)
 
 
@@ -51,7 +57,8 @@ def test_paper_budget_keeps_the_papers_values() -> None:
 def test_a_flag_wins_over_the_rule() -> None:
     config, notes = finished("fourierf-vm", TINY_SCENE, "--optimizer.weight-decay", "0.05")
     assert config.optimizer.weight_decay == 0.05
-    assert not any(n.startswith("budget rule") for n in notes)
+    assert config.optimizer.lr_decay_ratio == 1.0, "the values the user did not touch still follow the rule"
+    assert any(n.startswith("budget rule") and "kept your optimizer.weight_decay" in n for n in notes)
 
 
 def test_the_rule_can_be_turned_off() -> None:
@@ -72,5 +79,6 @@ def test_forward_facing_short_run_gets_the_faster_grid_rate(llff_scene: Path, me
     config, _ = finished(method, llff_scene)
     assert config.scene_preset == "real"
     assert config.optimizer.lr_grids == 0.08
+    assert config.pipeline.model.tv_decay_ratio == (1.0 if method == "fourierf-vm" else 0.1)
     long_run, _ = finished(method, llff_scene, "--max-num-iterations", str(PAPER_ITERATIONS + 2000))
     assert long_run.optimizer.lr_grids == 0.02

@@ -67,6 +67,7 @@ def without_decisions(config: TrainerConfig) -> dict:
     data["pipeline"]["model"].pop("tv_decay_ratio")
     data["optimizer"].pop("weight_decay")
     data["optimizer"].pop("lr_grids")
+    data["optimizer"].pop("lr_decay_ratio")
     data["pipeline"]["datamanager"]["dataparser"].pop("data")
     data.pop("data")
     data.pop("output_dir")
@@ -88,7 +89,7 @@ def test_blender_scene_keeps_the_synthetic_preset_and_gets_its_declared_effects(
     assert without_decisions(config) == without_decisions(given), "a bounded scene changes no setting"
     assert config.pipeline.effects == EffectsConfig.of(BLENDER_DECLARATION)
     assert notes[0].startswith("run size for 4 view(s) of 100x100 on cpu: ")
-    assert notes[1].startswith("budget rule (800 < 10000 iterations): weight_decay=0.0")
+    assert notes[1].startswith("budget rule (800 < 10000 iterations): weight_decay=0.0, lr_decay_ratio=1.0")
     assert notes[2:] == [
         "scene effects: background=white, rays=euclidean, view-dependent=no, occlusion-regularisation=no "
         "(the scene declares: background=white, rays=euclidean, view-dependent=no, occlusion-regularisation=no, "
@@ -168,7 +169,8 @@ def test_a_methods_own_effect_setting_wins_over_the_declaration() -> None:
 @pytest.mark.parametrize(
     ("method", "flags", "expected"),
     [
-        ("fourierf-vm", [], 0.1),  # TensoRF's lr decay, so TensoRF's TV decay
+        ("fourierf-vm-paper", [], 0.1),  # TensoRF's lr decay, so TensoRF's TV decay
+        ("fourierf-vm", [], 1.0),  # a short run's budget rule: no lr decay, so no TV decay
         ("tensorf-vm", [], 0.1),
         ("fourierf-vm-code", [], 1.0),  # the official code decays nothing
         ("fourierf-vm", ["--optimizer.lr-decay-ratio", "0.3"], 0.3),

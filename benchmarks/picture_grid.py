@@ -18,6 +18,7 @@ from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
+from skimage.transform import resize
 
 from fourierf_plugin.accel.allocator import keep_freed_memory
 from fourierf_plugin.engine.loading import load_run
@@ -44,6 +45,7 @@ def main() -> None:
     ap.add_argument("--split", default="test")
     ap.add_argument("--views", type=int, default=2, help="how many of the split's views (rows of RGB/depth/acc)")
     ap.add_argument("--output", type=Path, required=True)
+    ap.add_argument("--downscale", type=int, default=2, help="shrink the grid by this factor (a smaller docs/ file)")
     args = ap.parse_args()
     keep_freed_memory()  # as the console scripts do: renders reuse freed tensor memory instead of faulting it back
     if len(args.labels) != len(args.runs):
@@ -60,7 +62,11 @@ def main() -> None:
         rows.append(np.concatenate([blank, *acc], axis=1))
     names = [view["name"] for view in renders[0]]
     args.output.parent.mkdir(parents=True, exist_ok=True)
-    iio.imwrite(args.output, np.concatenate(rows, axis=0))
+    grid = np.concatenate(rows, axis=0)
+    if args.downscale > 1:
+        shape = (grid.shape[0] // args.downscale, grid.shape[1] // args.downscale, 3)
+        grid = (resize(grid, shape, anti_aliasing=True) * 255).round().astype(np.uint8)
+    iio.imwrite(args.output, grid)
     heads = " | ".join(["ground truth", *args.labels])
     print(f"wrote {args.output}: views {names}; columns {heads}; rows rgb, depth, accumulation")
 

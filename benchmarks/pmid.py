@@ -23,8 +23,10 @@ val-chosen setting's test score is reported. Stages:
     python benchmarks/pmid.py seeds  --protocol pcpu pmid --scene lego fern   # the val-chosen setting, more seeds
     python benchmarks/pmid.py report                                          # BENCHMARKS.md section
 
-``--device cuda --jobs 6`` runs several trainings at once on one GPU (each with ``--threads``); the PSNRs do not
-depend on the device beyond float rounding, the times do (the table names the device).
+Rows go to ``benchmarks/results/pmid/results.jsonl`` (committed; a recorded run is skipped, so the report is
+regenerated from it alone). ``--device cuda --jobs 4`` runs four trainings at once on one GPU (each with
+``--threads``; sixteen at once time-slice it to a crawl); the PSNRs do not depend on the device beyond float rounding
+and random streams, the times do (the table names the device).
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ import numpy as np
 from fourierf_plugin.bench.protocol import (
     Run,
     evaluate,
+    fmt,
     load_results,
     section_head,
     train_and_eval,
@@ -155,7 +158,7 @@ def execute(run: Run, scene: str, args: argparse.Namespace) -> dict:
 
 def run_all(plan: Sequence[tuple[str, Run]], args: argparse.Namespace) -> None:
     """Run what is not yet recorded, ``--jobs`` at a time; each finished row is appended at once."""
-    path = args.work / "results.jsonl"
+    path = args.results
     done = load_results(path)
     todo = [(scene, run) for scene, run in plan if f"{scene}/{run.key}" not in done]
     todo.sort(key=lambda item: (-item[1].iters, item[0] != "fern"))  # longest first: the pool ends on short runs
@@ -208,7 +211,7 @@ def sweep_plan(args: argparse.Namespace) -> list[tuple[str, Run]]:
 
 
 def seeds_plan(args: argparse.Namespace) -> list[tuple[str, Run]]:
-    results = load_results(args.work / "results.jsonl")
+    results = load_results(args.results)
     plan = []
     for p in args.protocol:
         for scene in args.scene:
@@ -220,19 +223,15 @@ def seeds_plan(args: argparse.Namespace) -> list[tuple[str, Run]]:
     return plan
 
 
-def mean_std(values: list[float]) -> str:
-    return f"{np.mean(values):.2f}" if len(values) == 1 else f"{np.mean(values):.2f} ± {np.std(values):.2f}"
-
-
 def report(args: argparse.Namespace) -> list[str]:
-    results = load_results(args.work / "results.jsonl")
+    results = load_results(args.results)
     body = section_head(
         "Few-shot quality at two budgets: P-CPU and P-MID, settings chosen on val",
         "python benchmarks/pmid.py sweep|seeds|report",
         "Protocols and settings: the script's docstring. Each method at its own val-chosen setting (best val PSNR "
         f"of seed {SEEDS[0]}); test PSNR of that setting only, mean ± std over the seeds run. PSNRs agree across "
-        "devices up to float rounding and random streams; training seconds are the device's, so compare them only "
-        "within one device.",
+        "devices up to float rounding and random streams. Training seconds are the device's and were taken while other "
+        "work shared the machine: they are no speed measurement (the speed benchmarks are the interleaved ones).",
     )
     summary = [
         "| scene | protocol | device | fourierf-vm: setting, test PSNR (seeds) | tensorf-vm: setting, test PSNR (seeds)"
@@ -251,7 +250,7 @@ def report(args: argparse.Namespace) -> list[str]:
             test = {m: [r["psnr"] for r in rows[m]] for m in METHODS}
             secs = {m: np.mean([r["train_seconds"] for r in rows[m]]) for m in METHODS}
             device = "/".join(sorted({r["device"] for m in METHODS for r in rows[m]}))
-            cells = [f"`{picked[m]}`, {mean_std(test[m])} ({len(test[m])})" for m in METHODS]
+            cells = [f"`{picked[m]}`, {fmt(test[m], 2)} ({len(test[m])})" for m in METHODS]
             gap = np.mean(test["fourierf-vm"]) - np.mean(test["tensorf-vm"])
             summary.append(
                 f"| {scene} | {name} | {device} | {cells[0]} | {cells[1]} | **{gap:+.2f}** | "
@@ -259,7 +258,7 @@ def report(args: argparse.Namespace) -> list[str]:
             )
             for s in SETTINGS[scene]:
                 vals = [
-                    mean_std([r["val_psnr"] for r in tables[m][s] if r["seed"] == SEEDS[0]]) if s in tables[m] else "—"
+                    fmt([r["val_psnr"] for r in tables[m][s] if r["seed"] == SEEDS[0]], 2) if s in tables[m] else "—"
                     for m in METHODS
                 ]
                 if vals != ["—", "—"]:
@@ -296,14 +295,22 @@ def main() -> None:
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data",
                     help="folder holding blender/lego and llff/fern")  # fmt: skip
     ap.add_argument("--lpips", type=Path, default=REPO.parent / "shared" / "lpips" / "lpips_alex_v0.1.pth")
-    ap.add_argument("--work", type=Path, default=REPO / "outputs" / "bench_pmid")
+    ap.add_argument("--work", type=Path, default=REPO / "outputs" / "bench_pmid", help="run folders and logs")
+    ap.add_argument("--results", type=Path, default=REPO / "benchmarks" / "results" / "pmid" / "results.jsonl",
+                    help="one row per finished run (the report reads it; finished runs are skipped)")  # fmt: skip
     ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
     ap.add_argument("--only", nargs="+", default=None, help="sweep only these settings (names from SETTINGS)")
     ap.add_argument("--jobs", type=int, default=1, help="trainings at once")
     ap.add_argument("--threads", type=int, default=None, help="CPU threads per training")
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")
     args = ap.parse_args()
+    known = {name for scene in args.scene for name in SETTINGS[scene]}
+    unknown = sorted(set(args.only or ()) - known)
+    if unknown:
+        scenes = " ".join(args.scene)
+        sys.exit(f"error: --only {' '.join(unknown)}: no such setting for {scenes}; known: {sorted(known)}")
     args.work.mkdir(parents=True, exist_ok=True)
+    args.results.parent.mkdir(parents=True, exist_ok=True)
     if args.stage == "report":
         print(update_benchmarks_md(args.markdown, BEGIN, END, report(args)))
         return

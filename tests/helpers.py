@@ -6,9 +6,11 @@ scene or of a flag name should be fixed once, not in five files.
 
 from __future__ import annotations
 
+import importlib.util
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 import torch
@@ -154,3 +156,14 @@ def accumulate_rays(weights: torch.Tensor, values: torch.Tensor) -> torch.Tensor
     num_rays, num_samples = weights.shape
     rays = torch.arange(num_rays).repeat_interleave(num_samples)
     return accumulate(weights.reshape(-1), values.reshape(-1, values.shape[-1]), rays, num_rays)
+
+
+def load_benchmark(name: str) -> ModuleType:
+    """Import ``benchmarks/<name>.py`` (a script, not a package module) so its pure functions can be tested."""
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 from types import ModuleType
 
@@ -12,18 +10,12 @@ import pytest
 from fourierf_plugin.bench.report import Curve, headline
 from fourierf_plugin.bench.runner import RunTask, Scene, train_command
 from fourierf_plugin.bench.sweep import SweepSpec, expand
-
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "three_methods.py"
+from tests.helpers import load_benchmark
 
 
 @pytest.fixture(scope="module")
 def three() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("three_methods", SCRIPT)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("three_methods")
 
 
 def _curve(method: str, psnr: float, seconds: float) -> Curve:

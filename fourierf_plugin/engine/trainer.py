@@ -331,8 +331,9 @@ class TrainerConfig(InstantiateConfig):
     render rate so training slows by at most about ``viewer_max_slowdown``."""
     viewer_port: int = 7007
     """Port of the web viewer (the next free one is taken, and said, when it is in use)."""
-    viewer_max_slowdown: float = 0.1
-    """The share of training time the live viewer's renders may take (0.1: training slows by at most ~10 %)."""
+    viewer_max_slowdown: float = 0.05
+    """The share of training time the live viewer's snapshots, renders and meshes may take (0.05: 5 %). A browser on
+    the training machine adds its own drawing: on 2 CPU cores a headless chromium cost about as much again."""
     vis: Literal["none", "tensorboard"] = "none"
     """Also log to TensorBoard under RUN/tensorboard (pip install 'fourierf[tensorboard]')."""
     vis_image_every: int = 500

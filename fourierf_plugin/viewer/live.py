@@ -1,9 +1,16 @@
 """``fourierf-train ... --viewer True``: the web page during training, drawn from snapshots of the parameters.
 
-The training thread only ever copies the weights (``state_dict`` clones, when a browser is connected, the renderer
-is idle and the budget allows); a private second model loads that copy in the render thread and draws from it, so
-the optimiser never shares a tensor with a render and a render never waits on a step. Copies and renders together
-are held under ``max_slowdown`` of the wall time (:class:`RenderBudget`).
+A private second model loads a copy of the weights (``state_dict`` clones) and draws from it, so the optimiser never
+shares a tensor with a render. Copies, renders and meshes are made on the training thread itself, between two steps,
+when a browser is connected and the budget allows: together they take at most ``max_slowdown`` of the wall time
+(:class:`RenderBudget`), which is then the training's slowdown.
+
+Why not a render thread beside the training: on a CPU it costs far more than its own time. torch's OpenMP (libgomp)
+gives every thread that runs a parallel op its own team of worker threads; once the workers outnumber the cores,
+libgomp stops spinning at barriers and every parallel op of the training pays futex wake-ups, for the rest of the
+process. On 2 cores a render thread with 2 threads slowed P-CPU training by ~50 % at a 10 % render budget (the cores
+stood idle a quarter of the time); with 1 thread its renders oversubscribed the cores and stalled the step's OpenMP
+threads (+19-43 %). viser's callbacks only record what the browser did; the page's work waits for the next step.
 """
 
 from __future__ import annotations
@@ -17,9 +24,10 @@ import torch
 from torch import Tensor
 
 from fourierf_plugin.engine.observers import StepReport
-from fourierf_plugin.utils.console import warn
+from fourierf_plugin.utils.console import get_console, warn
 from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.viewer.render_budget import RenderBudget
+from fourierf_plugin.viewer.render_service import PreviewQuality
 from fourierf_plugin.viewer.scene_view import held_out_views
 from fourierf_plugin.viewer.server import ViewerServer, ViewerSettings, open_server, require_viser
 from fourierf_plugin.viewer.viewed_run import TrainingProgress, ViewedRun
@@ -28,8 +36,9 @@ if TYPE_CHECKING:
     from fourierf_plugin.models.fourierf import FourieRFModel
     from fourierf_plugin.pipelines.base import Pipeline
 
-LIVE_SETTINGS = ViewerSettings(preview_side=128, final_side=384, render_threads=1)
-"""Smaller pictures than for a saved run, rendered on one core: every render second is taken from training."""
+LIVE_SETTINGS = ViewerSettings(preview_side=128, final_side=384, preview_seconds=0.1, final_quality=PreviewQuality())
+"""Smaller and quicker pictures than for a saved run, the final one marched as a preview is (half the time, ~50 dB
+from the full render on P-CPU lego): every render second is taken from training."""
 
 
 def snapshot(model: FourieRFModel) -> dict[str, Tensor]:
@@ -62,7 +71,7 @@ class LiveViewer:
         """Opens the server at once (before the run folder exists), so a missing extra or an unusable port stops
         the run before anything is written."""
         if not 0 < max_slowdown <= 1:
-            fail(f"--viewer-max-slowdown {max_slowdown} must be in (0, 1]", "use e.g. 0.1 (training 10 % slower)")
+            fail(f"--viewer-max-slowdown {max_slowdown} must be in (0, 1]", "use e.g. 0.05 (training 5 % slower)")
         require_viser()
         self.budget = RenderBudget(max_slowdown)
         self.server = open_server(port, host)
@@ -72,8 +81,7 @@ class LiveViewer:
         self._page: ViewerServer | None = None
         self._stopped = False
         self.snapshots = 0
-        self._pending: tuple[dict[str, Tensor], int] | None = None
-        self._pending_lock = threading.Lock()
+        self._elapsed = 0.0
 
     # -- the observer protocol ---------------------------------------------------------------------------------------
     def started(self, pipeline: Pipeline, run_dir: Path, start_step: int) -> None:
@@ -82,14 +90,17 @@ class LiveViewer:
         viewed = ViewedRun(model, start_step, run_dir, progress)
         viewed.load_snapshot(snapshot(pipeline.model), start_step)
         datamanager = pipeline.datamanager
-        view = ViewerServer(self.server, viewed, datamanager.reference_outputs, None, LIVE_SETTINGS, self.budget)
+        view = ViewerServer(
+            self.server, viewed, datamanager.reference_outputs, None, LIVE_SETTINGS, render_thread=False
+        )
         self.view = self._page = view
+
+        def show_test_views() -> None:
+            torch.set_num_threads(1)  # no OpenMP team of its own (module docstring)
+            view.show_test_views(held_out_views(datamanager.parser))
+
         # Reading the test images takes seconds on a real scene: not on the training thread.
-        threading.Thread(
-            target=lambda: view.show_test_views(held_out_views(datamanager.parser)),
-            name="fourierf-viewer-test-views",
-            daemon=True,
-        ).start()
+        threading.Thread(target=show_test_views, name="fourierf-viewer-test-views", daemon=True).start()
 
     def step_done(self, pipeline: Pipeline, report: StepReport) -> None:
         try:
@@ -106,21 +117,26 @@ class LiveViewer:
         assert progress is not None
         progress.step, progress.max_steps, progress.metrics = report.step, report.max_steps, report.metrics
         progress.f_density, progress.f_color = report.f_density, report.f_color
-        if not self._wants_snapshot(view):
+        self._elapsed = report.elapsed_s
+        if view.client_count == 0 or self.budget.wait_seconds() > 0:
             return
         started = time.perf_counter()
-        state = snapshot(pipeline.model)
+        if not view.due:  # the page shows everything it was asked for: show the newer weights
+            self._load_snapshot(view, pipeline, report.step)
+        view.do_due_work()
         self.budget.charge(started, time.perf_counter() - started)
-        with self._pending_lock:
-            self._pending = (state, report.step)
-        self.snapshots += 1
-        threading.Thread(target=self._load_pending, name="fourierf-viewer-snapshot", daemon=True).start()
 
     def finished(self, pipeline: Pipeline, step: int, interrupted: bool) -> None:
         """Close the page with the run (Ctrl-C included)."""
         if self._stopped:
             return
         self._stopped = True
+        spent, elapsed = self.budget.spent_seconds, self._elapsed
+        share = f" ({100 * spent / elapsed:.1f} % of {elapsed:.0f} s)" if elapsed > 0 else ""
+        get_console().print(
+            f"live viewer: {self.snapshots} snapshots, {self._page.renders if self._page else 0} pictures, "
+            f"{spent:.1f} s of the training's time{share}"
+        )
         if self._page is None:
             self.server.stop()
             return
@@ -130,25 +146,10 @@ class LiveViewer:
         self._page.stop()
 
     # -- snapshots ----------------------------------------------------------------------------------------------------
-    def _wants_snapshot(self, view: ViewerServer) -> bool:
-        """Someone is watching, the last snapshot is loaded, and the budget allows the copy and a render."""
-        with self._pending_lock:
-            busy = self._pending is not None
-        return not busy and view.client_count > 0 and self.budget.wait_seconds() == 0
-
-    def _load_pending(self) -> None:
-        """Load the snapshot into the render model (off the training thread) and ask for a new picture."""
-        view = self.view
-        with self._pending_lock:
-            pending = self._pending
-        if view is None or pending is None:
-            return
-        state, step = pending
-        started = time.perf_counter()
-        view.viewed.load_snapshot(state, step)
-        self.budget.charge(started, time.perf_counter() - started)
+    def _load_snapshot(self, view: ViewerServer, pipeline: Pipeline, step: int) -> None:
+        """Copy the training weights into the page's model and mark the page out of date."""
+        view.viewed.load_snapshot(snapshot(pipeline.model), step)
+        self.snapshots += 1
         view.follow_run_cutoffs()
         view.refresh_status()
         view.changed(moving=False)
-        with self._pending_lock:
-            self._pending = None

@@ -4,6 +4,9 @@ Controls: which picture (rgb, depth, accumulation), the density and colour cutof
 step), the preview and final sizes, and "mesh at this cutoff". One background thread renders for every connected
 browser: a small preview while the camera (or a slider) moves, the final size once it has rested ``rest_seconds``.
 viser's own callbacks only record what changed, so the page never waits for the model.
+
+Without its own thread (``render_thread=False``) the page does nothing until its host calls :meth:`do_due_work`: the
+live viewer calls it from the training thread between steps (why: ``viewer.live``).
 """
 
 from __future__ import annotations
@@ -81,9 +84,10 @@ class ViewerSettings:
     side, learnt from the previews before it) and is scaled up to the preview size."""
     preview_quality: PreviewQuality | None = field(default_factory=PreviewQuality)
     """The cheaper marching of previews (None: previews march as the final picture does)."""
+    final_quality: PreviewQuality | None = None
+    """The marching of the final picture (None: the model's own, as ``fourierf-render`` draws it)."""
     render_threads: int | None = None
-    """Torch threads of the render thread (None: torch's default, every core). The live viewer uses 1, so a render
-    never takes more than one core from training."""
+    """Torch threads of the render thread (None: torch's default, every core)."""
 
 
 @dataclass(frozen=True)
@@ -135,7 +139,9 @@ class ViewerServer:
         settings: ViewerSettings | None = None,
         budget: RenderBudget | None = None,
         clock: Callable[[], float] = time.perf_counter,
+        render_thread: bool = True,
     ) -> None:
+        """``render_thread=False``: no thread of its own; pictures and meshes are made only in :meth:`do_due_work`."""
         self.server = server
         self.viewed = viewed
         self.settings = settings or ViewerSettings()
@@ -152,13 +158,16 @@ class ViewerServer:
         self.renders = 0
         self._rendering = False
         self.final_renders = 0
+        self._mesh_requests: collections.deque[viser.ClientHandle | None] = collections.deque()
         self.log: collections.deque[RenderRecord] = collections.deque(maxlen=1000)
         self.layout, self.frustums = build_scene(server, train, test)
         self._build_gui()
         server.on_client_connect(self.connect)
         server.on_client_disconnect(self._disconnected)
-        self._thread = threading.Thread(target=self._render_loop, name="fourierf-viewer-render", daemon=True)
-        self._thread.start()
+        self._thread: threading.Thread | None = None
+        if render_thread:
+            self._thread = threading.Thread(target=self._render_loop, name="fourierf-viewer-render", daemon=True)
+            self._thread.start()
 
     def show_test_views(self, test: DataparserOutputs | None) -> None:
         """Add the held-out views' frustums later (the live viewer loads them off the training thread)."""
@@ -187,7 +196,14 @@ class ViewerServer:
         self.mesh_button = gui.add_button("Mesh at this cutoff", hint="marching cubes at the density cutoff")
         for handle in (self.output, self.density_slider, self.color_slider, self.preview_slider, self.final_slider):
             handle.on_update(lambda _: self.changed())
-        self.mesh_button.on_click(lambda event: self.export_mesh(event.client))
+        self.mesh_button.on_click(lambda event: self._mesh_clicked(event.client))
+
+    def _mesh_clicked(self, client: viser.ClientHandle | None) -> None:
+        """At once on viser's thread, or queued for the host's next :meth:`do_due_work` (no thread of its own)."""
+        if self._thread is None:
+            self._mesh_requests.append(client)
+        else:
+            self.export_mesh(client)
 
     def _show_cameras(self, visible: bool) -> None:
         for frustum in self.frustums:
@@ -303,14 +319,39 @@ class ViewerServer:
             if wait > 0:
                 self._stop.wait(min(wait, 0.05))
                 continue
-            self._rendering = True
-            try:
-                self._render(*job)
-            except Exception as err:  # a failed picture must not end the page (or the training it watches)
-                warn(f"viewer render failed: {err}")
-                self._stop.wait(1.0)
-            finally:
-                self._rendering = False
+            if not self._run(job):
+                self._stop.wait(1.0)  # a failing render is not retried at full speed
+
+    def _run(self, job: tuple[_ClientView, tuple[int, int], bool]) -> bool:
+        """Render one job; False when it failed (said aloud: a failed picture must not end the page or the run)."""
+        self._rendering = True
+        try:
+            self._render(*job)
+        except Exception as err:
+            warn(f"viewer render failed: {err}")
+            return False
+        finally:
+            self._rendering = False
+        return True
+
+    @property
+    def due(self) -> bool:
+        """Work is waiting: a browser's picture is out of date, or a mesh was asked for."""
+        return bool(self._mesh_requests) or self._next_job() is not None
+
+    def do_due_work(self) -> bool:
+        """On the calling thread: export a requested mesh, else render one due picture if the budget allows; whether
+        anything was done. For a page without its own thread (the live viewer's)."""
+        if self._stop.is_set():
+            return False
+        if self._mesh_requests:
+            self.export_mesh(self._mesh_requests.popleft())
+            return True
+        job = self._next_job()
+        if job is None or self.budget.wait_seconds() > 0:
+            return False
+        self._run(job)
+        return True
 
     @property
     def busy(self) -> bool:
@@ -322,7 +363,7 @@ class ViewerServer:
         side = int(self.final_slider.value if final else self.preview_slider.value)
         pose = camera_from_opencv_pose(camera.wxyz, camera.position, camera.fov, camera.aspect, side)
         output: Output = self.output.value  # type: ignore[assignment]
-        quality = None if final else self.settings.preview_quality
+        quality = self.settings.final_quality if final else self.settings.preview_quality
         size = (pose.width, pose.height) if final else self.pacer.render_size(pose.width, pose.height)
         started = time.perf_counter()
         with self.viewed.lock:
@@ -380,6 +421,6 @@ class ViewerServer:
             return
         self._stop.set()
         self._wake.set()
-        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+        if self._thread is not None and self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join(timeout=30.0)
         self.server.stop()

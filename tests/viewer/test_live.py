@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import threading
 import time
 import urllib.request
 from pathlib import Path
@@ -40,7 +41,7 @@ class BrowserAtStart:
         if report.step == ITERS // 2:
             with urllib.request.urlopen(f"http://127.0.0.1:{self.viewer.port}/", timeout=10) as response:
                 self.page = response.read().decode()
-            # Give the render thread time to draw while training goes on.
+            # The viewer draws between steps, on this thread: by now a picture has been sent.
             self.client.scene.received.wait(timeout=20)
 
     def finished(self, pipeline: Pipeline, step: int, interrupted: bool) -> None:
@@ -53,9 +54,21 @@ def _records(run_dir: Path) -> list[dict]:
     return [{k: v for k, v in r.items() if k not in ("elapsed_s", "train_seconds")} for r in records]
 
 
-def test_the_live_viewer_draws_snapshots_and_leaves_training_unchanged(tmp_path: Path) -> None:
+def test_the_live_viewer_draws_snapshots_and_leaves_training_unchanged(tmp_path: Path, monkeypatch) -> None:
+    """Also: every picture is made on the training thread (a second thread computing with torch would give OpenMP a
+    second worker team, which slows every later training step on a CPU: ``viewer.live``)."""
     require_module("viser", VISER_WHY)
+    from fourierf_plugin.viewer import server as server_module
     from fourierf_plugin.viewer.live import LiveViewer
+
+    drawn_on: list[threading.Thread] = []
+    real_render = server_module.render_view
+
+    def recorded(*args, **kwargs):
+        drawn_on.append(threading.current_thread())
+        return real_render(*args, **kwargs)
+
+    monkeypatch.setattr(server_module, "render_view", recorded)
 
     plain = Trainer(tiny_trainer_config(tmp_path / "plain", iters=ITERS))
     plain_dir = plain.train()
@@ -72,6 +85,7 @@ def test_the_live_viewer_draws_snapshots_and_leaves_training_unchanged(tmp_path:
     height, width = images[-1].shape[:2]
     assert max(height, width) in (128, 384)  # the live preview or final size
     assert viewer.view is not None and viewer.view.viewed.progress.finished
+    assert drawn_on and set(drawn_on) == {threading.current_thread()}, "a picture was made off the training thread"
 
     assert _records(watched_dir) == _records(plain_dir)
     plain_state, watched_state = plain.pipeline.model.state_dict(), watched.pipeline.model.state_dict()

@@ -146,3 +146,43 @@ def test_the_render_thread_uses_its_own_thread_count(page) -> None:
     assert call.threads == 1  # ViewerSettings.render_threads
     _finish(call, view)
     assert torch.get_num_threads() == before  # this thread's count is untouched
+
+
+def test_a_page_without_its_own_thread_works_only_when_its_host_asks(trained_run, monkeypatch, tmp_path) -> None:
+    """The live viewer's page: no render thread; each ``do_due_work`` makes at most one picture (or one requested
+    mesh) on the calling thread, so the training thread that calls it between steps is the only one computing."""
+    require_module("viser", "the viewer needs viser (pip install '.[viewer]')")
+    trainer, run_dir = trained_run
+    threads: list[threading.Thread] = []
+
+    def render_here(model, camera, cutoffs, abort=None, quality=None, render_size=None):
+        threads.append(threading.current_thread())
+        blank = np.zeros((camera.height, camera.width, 3), dtype=np.uint8)
+        return Rendered(blank, blank, blank, 0.01)
+
+    meshes: list[object] = []
+    monkeypatch.setattr(server_module, "render_view", render_here)
+    monkeypatch.setattr(ViewerServer, "export_mesh", lambda self, client=None: meshes.append(client))
+    clock = FakeClock()
+    pipeline = trainer.pipeline
+    viewed = ViewedRun(pipeline.model, pipeline.model.max_iters, run_dir)
+    settings = ViewerSettings(preview_side=64, final_side=128)
+    server = open_server(0, "127.0.0.1")
+    view = ViewerServer(
+        server, viewed, pipeline.datamanager.reference_outputs, None, settings, clock=clock, render_thread=False
+    )
+    try:
+        client = FakeClient()
+        view.connect(client)
+        assert view.due and not client.scene.images  # due, but nothing drawn until asked
+        assert view.do_due_work() and threads == [threading.current_thread()]
+        assert len(client.scene.images) == 1 and client.scene.images[0].shape[0] == 64  # the preview first
+        assert not view.due and not view.do_due_work()  # at rest, nothing more until the rest time has passed
+        clock.now += 1.0
+        assert view.do_due_work() and client.scene.images[-1].shape[0] == 128  # then the final picture
+        view._mesh_clicked(client)  # the button, as viser calls it: queued, not run on viser's thread
+        assert not meshes and view.due
+        assert view.do_due_work() and meshes == [client]
+        assert not view.due
+    finally:
+        view.stop()

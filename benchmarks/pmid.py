@@ -96,6 +96,9 @@ PROTOCOLS = {
 WD0 = ["--optimizer.weight-decay", "0"]
 NO_DECAY = ["--optimizer.lr-decay-ratio", "1.0"]
 TV_CONST = ["--pipeline.model.tv-decay-ratio", "1.0"]
+OCC_ON = ["--pipeline.effects.occlusion-regularization", "True"]
+RAMP = "--pipeline.model.fourier.ramp-fraction"
+F_FINAL = "--pipeline.model.fourier.f-final"
 TV_LOW = ["--pipeline.model.tv-weight-density", "0.1", "--pipeline.model.tv-weight-appearance", "0.1"]
 SETTINGS: dict[str, dict[str, list[str]]] = {
     # Object scenes: the synthetic preset and the levers the issue names (weight decay, lr decay, TV, f0/Δ).
@@ -109,6 +112,14 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "wd0-lr0.04": [*WD0, "--optimizer.lr-grids", "0.04"],
         "wd0-ramp0.5": [*WD0, "--pipeline.model.fourier.ramp-fraction", "0.5"],
         "wd0-f0.1": [*WD0, "--pipeline.model.fourier.f0-density", "0.1", "--pipeline.model.fourier.f0-color", "0.1"],
+        # Session 12: the levers left, on the val-chosen wd0-nodecay (a longer ramp, a final cutoff below 1, the
+        # occlusion term on an object).
+        "wd0-nodecay-ramp0.5": [*WD0, *NO_DECAY, RAMP, "0.5"],
+        "wd0-nodecay-ramp0.8": [*WD0, *NO_DECAY, RAMP, "0.8"],
+        "wd0-nodecay-ffinal0.7": [*WD0, *NO_DECAY, F_FINAL, "0.7"],
+        "wd0-nodecay-ffinal0.5": [*WD0, *NO_DECAY, F_FINAL, "0.5"],
+        "wd0-nodecay-occ": [*WD0, *NO_DECAY, *OCC_ON],
+        "wd0-nodecay-ramp0.5-ffinal0.7": [*WD0, *NO_DECAY, RAMP, "0.5", F_FINAL, "0.7"],
     },
     # Forward-facing scenes: the real-scene preset (the trainer applies it), its grid lr, the occlusion term, f0/Δ,
     # Floaters-No-More gradient scaling.
@@ -121,9 +132,13 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-occ0": ["--optimizer.lr-grids", "0.08", "--pipeline.model.occlusion-weight", "0"],
         "lr0.08-ramp0.5": ["--optimizer.lr-grids", "0.08", "--pipeline.model.fourier.ramp-fraction", "0.5"],
         "lr0.08-fnm": ["--optimizer.lr-grids", "0.08", "--pipeline.model.floaters-gradient-scaling", "True"],
+        "lr0.08-tvconst-fnm": ["--optimizer.lr-grids", "0.08", *TV_CONST,
+                               "--pipeline.model.floaters-gradient-scaling", "True"],
+        "lr0.08-tvconst-ramp0.5": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.5"],
+        "lr0.08-tvconst-ffinal0.7": ["--optimizer.lr-grids", "0.08", *TV_CONST, F_FINAL, "0.7"],
     },
 }  # fmt: skip
-CURRICULUM_ONLY = ("ramp", "f0")
+CURRICULUM_ONLY = ("ramp", "f0", "ffinal")
 """Settings that only change the curriculum: tensorf-vm (masks off) would repeat its run, so it skips them."""
 
 

@@ -66,12 +66,13 @@ RULES: tuple[Rule, ...] = (
     Rule("steps_per_save", int_at_least(1), "an integer >= 1", "1000"),
     Rule("log_every", int_at_least(1), "an integer >= 1", "50"),
     Rule("viewer_port", lambda v: int_at_least(1)(v) and v <= 65535, "a TCP port in 1..65535", "7007"),
-    Rule("viewer_max_slowdown", within(1e-3, 1.0), "a share of training time in [0.001, 1]", "0.1"),
+    Rule("viewer_max_slowdown", within(1e-3, 1.0), "a share of training time in [0.001, 1]", "0.05"),
     Rule("vis_image_every", int_at_least(1), "an integer >= 1", "500"),
     Rule("threads", optional(int_at_least(1)), "an integer >= 1 (or omitted for torch's default)", "2"),
     Rule("pipeline.datamanager.rays_per_batch", int_at_least(1), "an integer >= 1", "4096"),
     Rule(f"{_MODEL}.fourier.f0_density", within(0.0, 1.0), "a cutoff in [0, 1] (0 keeps only DC, 1 all)", "0.3"),
     Rule(f"{_MODEL}.fourier.f0_color", within(0.0, 1.0), "a cutoff in [0, 1] (0 keeps only DC, 1 all)", "0.3"),
+    Rule(f"{_MODEL}.fourier.f_final", within(1e-3, 1.0), "a cutoff in (0, 1] (1: the whole spectrum)", "1.0"),
     Rule(f"{_MODEL}.fourier.ramp_fraction", at_least(0.0), "a fraction of the run >= 0", "0.2"),
     Rule(f"{_MODEL}.fourier.plane_leakage", at_least(0.0), "a weight >= 0", "0"),
     Rule(f"{_MODEL}.step_ratio", positive, "a number of voxels > 0", "0.5"),
@@ -150,6 +151,19 @@ def check_zerorf_options(config: Any) -> None:
         )
 
 
+def check_final_cutoff(fourier: Any) -> None:
+    """The band only opens: an initial cutoff above the final one is a contradiction, not a schedule."""
+    for name in ("f0_density", "f0_color"):
+        f0 = getattr(fourier, name)
+        if fourier.enabled and f0 > fourier.f_final:
+            final_flag = flag_of(f"{_MODEL}.fourier.f_final")
+            fail(
+                f"{flag_of(f'{_MODEL}.fourier.{name}')} {f0} is above {final_flag} {fourier.f_final}: the cutoff only"
+                " grows",
+                f"pass {final_flag} {f0} or more, or a smaller initial cutoff",
+            )
+
+
 EVENT_SCHEDULES = (f"{_MODEL}.field.upsample_fractions", f"{_MODEL}.occupancy_update_fractions")
 """Events placed at fractions of the run: each must land on a step inside it."""
 
@@ -162,6 +176,7 @@ def check_training_options(config: Any) -> None:
             flag = flag_of(rule.path)
             fail(f"{flag} {_show(value)} is out of range: it must be {rule.needs}", f"pass e.g. {flag} {rule.example}")
     check_zerorf_options(config)
+    check_final_cutoff(config.pipeline.model.fourier)
     iters = config.max_num_iterations
     if not (_integer(iters) and iters >= 1):
         fail(f"--max-num-iterations must be at least 1, got {iters}", "pass a positive number")

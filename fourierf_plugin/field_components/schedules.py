@@ -39,18 +39,24 @@ def _check_step(step: int) -> int:
 
 
 # ------------------------------------------------------------------------------------------------------- cutoff
-def cutoff_at(step: int, f0: float, ramp_iters: int) -> float:
-    """Fourier cutoff at ``step``: linear from ``f0`` at step 0 to 1 at ``ramp_iters``, then 1 (paper, spec 4.1).
+def cutoff_at(step: int, f0: float, ramp_iters: int, f_final: float = 1.0) -> float:
+    """Fourier cutoff at ``step``: linear from ``f0`` at step 0 to ``f_final`` at ``ramp_iters``, then ``f_final``
+    (paper, spec 4.1: ``f_final`` = 1, the whole spectrum in the end).
 
-    ``ramp_iters <= 0`` opens the band at once; ``f0 == 1`` never filters (the TensoRF baseline).
+    ``f_final`` < 1 keeps the field band-limited for good (a few-shot prior; the paper's runs open fully).
+    ``ramp_iters <= 0`` opens the band at once; ``f0 >= f_final`` never changes (``f0 == 1``: the TensoRF baseline).
     """
     step = _check_step(step)
-    f0 = float(f0)
+    f0, f_final = float(f0), float(f_final)
     if not 0.0 <= f0 <= 1.0:  # also rejects NaN
         raise ValueError(f"initial Fourier cutoff f0 must lie in [0, 1], got {f0!r}")
-    if ramp_iters <= 0 or f0 >= 1.0:
-        return 1.0
-    return min(1.0, f0 + step * (1.0 - f0) / ramp_iters)
+    if not 0.0 < f_final <= 1.0:
+        raise ValueError(f"final Fourier cutoff must lie in (0, 1], got {f_final!r}")
+    if f0 > f_final:
+        raise ValueError(f"initial Fourier cutoff {f0!r} is above the final one {f_final!r}: the band only opens")
+    if ramp_iters <= 0 or f0 == f_final:
+        return f_final
+    return min(f_final, f0 + step * (f_final - f0) / ramp_iters)
 
 
 # ------------------------------------------------------------------------------------------------ event steps

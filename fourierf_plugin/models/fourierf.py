@@ -63,6 +63,9 @@ class FourierConfig:
     """Initial cutoff for the appearance grids."""
     ramp_fraction: float = 0.2
     """Fraction of the run after which the cutoff is fully open (paper, synthetic: 2000 of 10k iterations)."""
+    f_final: float = 1.0
+    """Cutoff the ramp ends at and keeps (paper: 1, the whole spectrum). Below 1 the field stays band-limited, so it
+    cannot drift to the masks-off solution once the ramp is over (the paper: for large Δ it converges to TensoRF)."""
     plane_leakage: float = 0.0
     """Weight kept on out-of-band plane coefficients; the paper zeroes them, the official code keeps 1e-6."""
     app_planes_follow_density: bool = False
@@ -153,7 +156,10 @@ class FourieRFModel(nn.Module):
         if not fc.enabled:
             return 1.0, 1.0
         ramp = round(fc.ramp_fraction * self.max_iters)
-        return schedules.cutoff_at(step, fc.f0_density, ramp), schedules.cutoff_at(step, fc.f0_color, ramp)
+        return (
+            schedules.cutoff_at(step, fc.f0_density, ramp, fc.f_final),
+            schedules.cutoff_at(step, fc.f0_color, ramp, fc.f_final),
+        )
 
     def reset_steps(self) -> list[int]:
         """Steps after which parameters are replaced (and the optimiser restarts at the initial lr); none for a field

@@ -44,6 +44,10 @@ def test_plans_skip_curriculum_settings_for_tensorf_and_keep_only(pmid: ModuleTy
     args = argparse.Namespace(protocol=["pcpu"], scene=["lego"], only=["wd0", "wd0-ramp0.5"])
     plan = {(r.method, r.views) for _, r in pmid.sweep_plan(args)}
     assert plan == {("fourierf-vm", "pcpu-wd0"), ("tensorf-vm", "pcpu-wd0"), ("fourierf-vm", "pcpu-wd0-ramp0.5")}
+    args = argparse.Namespace(protocol=["pcpu"], scene=["lego"], only=["wd0-nodecay-ffinal0.7", "wd0-nodecay-occ"])
+    plan = {(r.method, r.views) for _, r in pmid.sweep_plan(args)}
+    assert ("tensorf-vm", "pcpu-wd0-nodecay-ffinal0.7") not in plan, "a final cutoff is a curriculum setting"
+    assert ("tensorf-vm", "pcpu-wd0-nodecay-occ") in plan
     args = argparse.Namespace(protocol=["pmid800"], scene=["lego", "fern"], only=None)
     assert {scene for scene, _ in pmid.sweep_plan(args)} == {"fern"}, "P-MID at 800 iterations is fern's check"
 

@@ -53,6 +53,23 @@ def test_cutoff_degenerate_cases() -> None:
     assert cutoff_at(0, 0.0, 100) == 0.0
 
 
+def test_cutoff_final_below_one_ends_and_stays_there() -> None:
+    f0, ramp, f_final = 0.3, 1000, 0.6
+    assert cutoff_at(0, f0, ramp, f_final) == f0
+    assert cutoff_at(500, f0, ramp, f_final) == pytest.approx(0.45)  # halfway between f0 and f_final
+    assert cutoff_at(ramp, f0, ramp, f_final) == pytest.approx(f_final)
+    assert all(cutoff_at(s, f0, ramp, f_final) == f_final for s in (ramp + 1, 10 * ramp))
+    assert cutoff_at(0, f0, 0, f_final) == f_final  # no ramp: the final band at once
+    assert cutoff_at(7, 0.6, ramp, 0.6) == 0.6  # f0 = f_final: a fixed band
+
+
+@pytest.mark.parametrize(("f0", "f_final", "match"), [(0.5, 0.4, "above the final"), (0.0, 0.0, "final"),
+                                                      (0.1, 1.2, "final"), (0.1, float("nan"), "final")])  # fmt: skip
+def test_cutoff_rejects_bad_final(f0: float, f_final: float, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        cutoff_at(0, f0, 100, f_final)
+
+
 @pytest.mark.parametrize("bad", [-0.01, 1.01, float("nan")])
 def test_cutoff_rejects_bad_f0(bad: float) -> None:
     with pytest.raises(ValueError, match="f0"):

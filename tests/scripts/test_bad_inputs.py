@@ -289,6 +289,12 @@ CASES: dict[str, Case] = {
         "train", train_with(f"{MODEL}.fourier.f0-color", "-0.1"), (f"{MODEL}.fourier.f0-color -0.1", "[0, 1]")
     ),
     "train: f0 NaN": Case("train", train_with(f"{MODEL}.fourier.f0-density", "nan"), ("f0-density nan",)),
+    "train: f0 above the final cutoff": Case(
+        "train",
+        train_with(f"{MODEL}.fourier.f0-density", "0.6", f"{MODEL}.fourier.f-final", "0.5"),
+        ("f0-density 0.6 is above", "f-final 0.5", "cutoff only grows"),
+    ),
+    "train: final cutoff 0": Case("train", train_with(f"{MODEL}.fourier.f-final", "0"), ("f-final 0", "(0, 1]")),
     "train: negative ramp": Case("train", train_with(f"{MODEL}.fourier.ramp-fraction", "-1"), ("ramp-fraction -1",)),
     "train: negative plane leakage": Case(
         "train", train_with(f"{MODEL}.fourier.plane-leakage", "-1"), ("plane-leakage -1", ">= 0")

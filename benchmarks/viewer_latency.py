@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from fourierf_plugin.bench.protocol import BIN, GRID_FLAGS, section_head, update_benchmarks_md
+from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.scripts.viewer import ViewerConfig, ViewerHandle, serve
 from fourierf_plugin.viewer.headless import CHROMIUM, CHROMIUM_ARGS
 from fourierf_plugin.viewer.render_service import camera_from_dataset, render_view
@@ -61,6 +62,8 @@ TINY_FLAGS = [
 SQUARE_WINDOW = {"width": 704, "height": 704}
 LATENCY_TARGET_S = 0.5
 SLOWDOWN_TARGET = 0.10
+BUDGET = TrainerConfig.viewer_max_slowdown
+"""``--viewer-max-slowdown``'s default, the budget the viewer arm runs at."""
 
 
 # -- helpers ----------------------------------------------------------------------------------------------------------
@@ -385,10 +388,10 @@ def section(latency: dict, ab: dict, command: str, iters: int, rounds: int) -> l
         " to the first preview handed to the page's connection. Slowdown: training seconds (metrics.jsonl) of three"
         f" arms, {rounds} interleaved rounds (order rotating), same flags: no viewer; `--viewer True"
         " --viewer-max-slowdown 0.001` with one headless browser on the page (the viewer draws its first picture and"
-        " then almost nothing: the browser's own cost on these cores); `--viewer True` at its default budget (0.05)"
-        " with the browser. The browser starts before the training and opens the page when the server answers; it"
-        " draws WebGL in software (SwiftShader) on the training's two cores. The viewer makes its snapshots and"
-        " pictures on the training thread between steps (`fourierf_plugin/viewer/live.py`)."
+        " then almost nothing: the browser's own cost on these cores); `--viewer True` at its default budget"
+        f" ({BUDGET}) with the browser. The browser starts before the training and opens the page when the server"
+        " answers; it draws WebGL in software (SwiftShader) on the training's two cores. The viewer makes its"
+        " snapshots and pictures on the training thread between steps (`fourierf_plugin/viewer/live.py`)."
     )
     seconds = ab["seconds"]
     rows = [
@@ -419,7 +422,7 @@ def section(latency: dict, ab: dict, command: str, iters: int, rounds: int) -> l
         + " | |",
         f"| the viewer over the browser alone (median / median - 1) | {100 * ab['viewer_over_browser']:+.1f} % | |",
         f"| the viewer's own snapshots and pictures, as it reports them (median share of the run) "
-        f"| {100 * ab['own_share']:.1f} % | budget 5 % |",
+        f"| {100 * ab['own_share']:.1f} % | budget {100 * BUDGET:g} % |",
         "| the browser's CPU seconds per run (page load included): page alone / with the viewer | "
         f"{', '.join(f'{v:.1f}' for v in ab['browser_cpu']['browser'])} / "
         f"{', '.join(f'{v:.1f}' for v in ab['browser_cpu']['viewer'])} | |",

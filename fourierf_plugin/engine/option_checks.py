@@ -66,7 +66,7 @@ RULES: tuple[Rule, ...] = (
     Rule("steps_per_save", int_at_least(1), "an integer >= 1", "1000"),
     Rule("log_every", int_at_least(1), "an integer >= 1", "50"),
     Rule("viewer_port", lambda v: int_at_least(1)(v) and v <= 65535, "a TCP port in 1..65535", "7007"),
-    Rule("viewer_max_slowdown", within(1e-3, 1.0), "a share of training time in [0.001, 1]", "0.05"),
+    Rule("viewer_max_slowdown", within(1e-3, 1.0), "a share of training time in [0.001, 1]", "0.03"),
     Rule("vis_image_every", int_at_least(1), "an integer >= 1", "500"),
     Rule("threads", optional(int_at_least(1)), "an integer >= 1 (or omitted for torch's default)", "2"),
     Rule("pipeline.datamanager.rays_per_batch", int_at_least(1), "an integer >= 1", "4096"),

@@ -331,9 +331,10 @@ class TrainerConfig(InstantiateConfig):
     render rate so training slows by at most about ``viewer_max_slowdown``."""
     viewer_port: int = 7007
     """Port of the web viewer (the next free one is taken, and said, when it is in use)."""
-    viewer_max_slowdown: float = 0.05
-    """The share of training time the live viewer's snapshots, renders and meshes may take (0.05: 5 %). A browser on
-    the training machine adds its own drawing: on 2 CPU cores a headless chromium cost about as much again."""
+    viewer_max_slowdown: float = 0.03
+    """The share of training time the live viewer's snapshots, renders and meshes may take (0.03: 3 %). Each picture
+    also costs the browser: on a 2-core CPU with the browser on it, training slowed by about twice this share plus the
+    browser's idle drawing (BENCHMARKS.md, "Web viewer")."""
     vis: Literal["none", "tensorboard"] = "none"
     """Also log to TensorBoard under RUN/tensorboard (pip install 'fourierf[tensorboard]')."""
     vis_image_every: int = 500

@@ -71,7 +71,10 @@ class LiveViewer:
         """Opens the server at once (before the run folder exists), so a missing extra or an unusable port stops
         the run before anything is written."""
         if not 0 < max_slowdown <= 1:
-            fail(f"--viewer-max-slowdown {max_slowdown} must be in (0, 1]", "use e.g. 0.05 (training 5 % slower)")
+            fail(
+                f"--viewer-max-slowdown {max_slowdown} must be in (0, 1]",
+                "use e.g. 0.03 (the viewer takes 3 % of the training time)",
+            )
         require_viser()
         self.budget = RenderBudget(max_slowdown)
         self.server = open_server(port, host)

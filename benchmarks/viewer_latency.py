@@ -74,15 +74,17 @@ def free_port() -> int:
 
 
 @contextmanager
-def headless_page(url: str, viewport: dict[str, int] = SQUARE_WINDOW) -> Iterator[object]:
-    """One headless chromium page open at ``url`` (Debian's chromium through playwright; no browser download)."""
+def headless_page(url: str | None, viewport: dict[str, int] = SQUARE_WINDOW) -> Iterator[object]:
+    """One headless chromium page open at ``url`` (None: a blank page, to be sent somewhere later); Debian's chromium
+    through playwright, no browser download."""
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as playwright:
         browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=list(CHROMIUM_ARGS))
         try:
             page = browser.new_page(viewport=viewport)
-            page.goto(url, wait_until="load", timeout=60_000)
+            if url is not None:
+                page.goto(url, wait_until="load", timeout=60_000)
             yield page
         finally:
             browser.close()
@@ -227,29 +229,22 @@ def train_with_browser(cmd: list[str], port: int, log: Path) -> float:
     """Run a training command with ``--viewer`` and keep one headless browser on its page until it ends; the
     browser's CPU seconds meanwhile. The browser starts (on a blank page) before the training, as a user's would
     already be open; it opens the page as soon as the server answers."""
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=list(CHROMIUM_ARGS))
+    with headless_page(None) as page:
+        time.sleep(2.0)  # the browser's own start-up settles
+        cpu_before = browser_cpu_seconds()
+        with log.open("w") as fh:
+            proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=REPO)
         try:
-            page = browser.new_page(viewport=SQUARE_WINDOW)
-            time.sleep(2.0)  # the browser's own start-up settles
-            cpu_before = browser_cpu_seconds()
-            with log.open("w") as fh:
-                proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=REPO)
-            try:
-                url = f"http://127.0.0.1:{port}/"
-                wait_for(lambda: proc.poll() is not None or page_up(url), 300, "the training's viewer page")
-                if proc.poll() is None:
-                    page.goto(url, wait_until="load", timeout=60_000)
-                if proc.wait() != 0:
-                    raise RuntimeError(f"training failed; see {log}")
-                return browser_cpu_seconds() - cpu_before
-            finally:
-                if proc.poll() is None:
-                    proc.kill()
+            url = f"http://127.0.0.1:{port}/"
+            wait_for(lambda: proc.poll() is not None or page_up(url), 300, "the training's viewer page")
+            if proc.poll() is None:
+                page.goto(url, wait_until="load", timeout=60_000)  # type: ignore[attr-defined]
+            if proc.wait() != 0:
+                raise RuntimeError(f"training failed; see {log}")
+            return browser_cpu_seconds() - cpu_before
         finally:
-            browser.close()
+            if proc.poll() is None:
+                proc.kill()
 
 
 def page_up(url: str) -> bool:

@@ -21,6 +21,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING
 
+import numpy as np
 import torch
 
 from fourierf_plugin.exporter.marching_cubes import describe, export_field_mesh
@@ -114,6 +115,17 @@ class _ClientView:
     moved_at: float = 0.0
     shown: tuple[int, int] | None = None
     shown_final: bool = False
+    pose: tuple[float, ...] = ()
+    """The camera as last reported (``camera_state``)."""
+
+
+def camera_state(camera: viser.CameraHandle) -> tuple[float, ...]:
+    """What of a browser's camera changes its picture: orientation, position, field of view and aspect.
+
+    A browser reports its camera again, unchanged, some 50-200 ms after each move; counted as a move, that echo
+    abandoned the preview under way and doubled the time from a move to its preview (0.5 s instead of 0.25 s)."""
+    values = (*np.asarray(camera.wxyz, dtype=float), *np.asarray(camera.position, dtype=float), camera.fov, camera.aspect)
+    return tuple(float(v) for v in values)
 
 
 def unique_mesh_path(meshes: Path, f_density: float) -> Path:
@@ -258,10 +270,14 @@ class ViewerServer:
         viser registers a browser once its first camera message has arrived, and runs this callback on its thread
         pool, possibly after that message's camera callbacks ran (without ``moved``, not yet registered): so the
         camera counts as reported from here on, not from the next message, which a browser left alone never sends."""
-        view = _ClientView(client, camera_generation=1, moved_at=self.clock())
+        view = _ClientView(client, camera_generation=1, moved_at=self.clock(), pose=camera_state(client.camera))
 
         def moved(_: object) -> None:
+            pose = camera_state(client.camera)
             with self._lock:
+                if pose == view.pose:
+                    return  # the browser's echo of the camera it already reported: not a move
+                view.pose = pose
                 view.camera_generation += 1
                 view.moved_at = self.clock()
             self._wake.set()

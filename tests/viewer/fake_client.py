@@ -31,6 +31,10 @@ class FakeCamera:
         self.wxyz = wxyz_from_rotation(view.camera_to_world[:, :3] @ OPENCV_TO_OPENGL)
         self.position = view.camera_to_world[:, 3].copy()
         self.fov, self.aspect = view.fov_y, view.width / view.height
+        self.report()
+
+    def report(self) -> None:
+        """Send the camera to the viewer (unchanged when called alone: the echo a browser sends after a move)."""
         for callback in self.callbacks:
             callback(self)
 

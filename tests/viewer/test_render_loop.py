@@ -138,6 +138,31 @@ def test_a_move_answered_during_an_abandoned_preview_still_gets_a_preview(page, 
     assert renders.none_pending()
 
 
+def test_the_browsers_echo_of_an_unchanged_camera_does_not_abandon_the_preview(page, trained_run) -> None:
+    """A browser reports its camera again, unchanged, 50-200 ms after a move. Before the fix that echo counted as a
+    move: the preview under way was abandoned and rendered again, doubling the latency benchmark's 0.25 s."""
+    view, renders, clock = page
+    trainer, _ = trained_run
+    cameras = trainer.pipeline.datamanager.reference_outputs.cameras
+    client = FakeClient()
+    view.connect(client)
+    _finish(renders.next(), view)
+    clock.now += 1.0
+    _finish(renders.next(), view)
+
+    client.camera.move_to(cameras, 1)
+    preview = renders.next()
+    client.camera.report()  # the echo, during the preview
+    assert not preview.abort(), "the echo of an unchanged camera abandoned the preview"
+    _finish(preview, view)
+    assert renders.none_pending() or not renders.calls.queue[0].preview  # no second preview of the same camera
+    clock.now += 1.0
+    final = renders.next()
+    assert not final.preview
+    _finish(final, view)
+    assert renders.none_pending()
+
+
 def test_the_render_thread_uses_its_own_thread_count(page) -> None:
     view, renders, _ = page
     before = torch.get_num_threads()

@@ -124,8 +124,8 @@ def camera_state(camera: viser.CameraHandle) -> tuple[float, ...]:
 
     A browser reports its camera again, unchanged, some 50-200 ms after each move; counted as a move, that echo
     abandoned the preview under way and doubled the time from a move to its preview (0.5 s instead of 0.25 s)."""
-    values = (*np.asarray(camera.wxyz, dtype=float), *np.asarray(camera.position, dtype=float), camera.fov, camera.aspect)
-    return tuple(float(v) for v in values)
+    pose = np.concatenate([np.asarray(camera.wxyz, dtype=float), np.asarray(camera.position, dtype=float)])
+    return (*(float(v) for v in pose), float(camera.fov), float(camera.aspect))
 
 
 def unique_mesh_path(meshes: Path, f_density: float) -> Path:

@@ -9,6 +9,7 @@ so the gain-versus-scale trend can be read off one table.
 |---|---|---|---|---|---|
 | P-CPU | 800 | 1024 | 64³ → 128³ | 100×100 | 504×378 (images_8) |
 | P-MID | 3000 | 2048 | 96³ → 192³ | 200×200 | 504×378 (images_8) |
+| P-CPU sizes, 3000 it. (curve) | 3000 | 1024 | 64³ → 128³ | 100×100 | 504×378 (images_8) |
 
 P-MID's final grid is what the CPU run sizing picks for these images (1.28 voxels per pixel of the larger side, capped
 at 192). TensoRF's LLFF configuration grows to 640³ over 25k iterations at 1/4 resolution and the paper's Blender
@@ -21,6 +22,7 @@ val-chosen setting's test score is reported. Stages:
 
     python benchmarks/pmid.py sweep  --protocol pcpu pmid --scene lego fern   # every setting, first seed
     python benchmarks/pmid.py seeds  --protocol pcpu pmid --scene lego fern   # the val-chosen setting, more seeds
+    python benchmarks/pmid.py curve  --scene fern     # P-CPU sizes at 3000 iterations, a checkpoint every 500 evaluated
     python benchmarks/pmid.py report                                          # BENCHMARKS.md section
 
 Rows go to ``benchmarks/results/pmid/results.jsonl`` (committed; a recorded run is skipped, so the report is
@@ -91,7 +93,22 @@ PROTOCOLS = {
     "pmid": Protocol(iters=3000, rays=2048, init_side=96, final_side=192, lego_downscale=2),
     # P-MID's sizes at P-CPU's 800 iterations: does quality hold as the budget grows from 800 to 3000?
     "pmid800": Protocol(iters=800, rays=2048, init_side=96, final_side=192, lego_downscale=2),
+    # P-CPU at 1.3 × its iterations: the wall time of a final cutoff 0.7 at 800 (ab_speed), for an equal-time check.
+    "pcpu1040": Protocol(iters=1040, rays=1024, init_side=64, final_side=128, lego_downscale=4),
+    # P-CPU's sizes at P-MID's 3000 iterations, for the curve along training (the ``curve`` stage only).
+    "pcpu3000": Protocol(iters=3000, rays=1024, init_side=64, final_side=128, lego_downscale=4),
 }
+PROTOCOL_NAMES = {
+    "pcpu": "P-CPU",
+    "pmid": "P-MID",
+    "pmid800": "P-MID sizes, 800 it.",
+    "pcpu1040": "P-CPU, 1040 it.",
+    "pcpu3000": "P-CPU sizes, 3000 it.",
+}
+CURVE_BASE = {"pcpu3000": "pcpu", "pmid": "pmid800"}
+"""A curve's protocol and the 800-iteration protocol of the same sizes, whose val-chosen setting the curve trains."""
+CURVE_EVERY = 500
+"""Iterations between the checkpoints a curve evaluates."""
 
 WD0 = ["--optimizer.weight-decay", "0"]
 NO_DECAY = ["--optimizer.lr-decay-ratio", "1.0"]
@@ -164,11 +181,31 @@ def execute(run: Run, scene: str, args: argparse.Namespace) -> dict:
     extra = [*protocol.flags(), "--device", args.device, "--budget-rule", "False", *SETTINGS[scene][setting]]
     if args.threads:
         extra += ["--threads", str(args.threads)]
+    if args.stage == "curve":  # keep a checkpoint every CURVE_EVERY iterations (the later flag wins)
+        extra += ["--steps-per-save", str(CURVE_EVERY), "--keep-checkpoints", str(run.iters // CURVE_EVERY + 1)]
     data = args.data / ("blender/lego" if scene == "lego" else "llff/fern")
-    lpips = args.lpips
-    row = train_and_eval(run, data, parser_args(scene, protocol), args.work / scene, lpips, scene, extra)
-    row |= evaluate(Path(row["run_dir"]), run.key, args.work / scene, lpips, split="val")
+    lpips, work = args.lpips, args.work / scene
+    row = train_and_eval(run, data, parser_args(scene, protocol), work, lpips, scene, extra)
+    row |= evaluate(Path(row["run_dir"]), run.key, work, lpips, split="val")
+    if args.stage == "curve":
+        row["curve"] = [
+            *curve_points(Path(row["run_dir"]), run, work, lpips),
+            [run.iters, row["val_psnr"], row["psnr"]],
+        ]
     return row | {"scene": scene, "protocol": protocol_name, "setting": setting, "device": args.device}
+
+
+def curve_points(run_dir: Path, run: Run, work: Path, lpips: Path) -> list[list[float]]:
+    """[step, val PSNR, test PSNR] of every checkpoint before the last (the row itself holds the last)."""
+    points = []
+    for ckpt in sorted((run_dir / "checkpoints").glob("step-*.ckpt")):
+        step = int(ckpt.stem.split("-")[-1])
+        if step >= run.iters:
+            continue
+        key = f"{run.key}.step{step}"
+        val = evaluate(run_dir, key, work, lpips, split="val", checkpoint=ckpt)["val_psnr"]
+        points.append([step, val, evaluate(run_dir, key, work, lpips, checkpoint=ckpt)["psnr"]])
+    return points
 
 
 def run_all(plan: Sequence[tuple[str, Run]], args: argparse.Namespace) -> None:
@@ -238,6 +275,69 @@ def seeds_plan(args: argparse.Namespace) -> list[tuple[str, Run]]:
     return plan
 
 
+def curve_plan(args: argparse.Namespace) -> list[tuple[str, Run]]:
+    """Each method at ``--only``'s settings, else at the val-chosen setting of the 800-iteration protocol of the
+    same sizes (``CURVE_BASE``), first seed."""
+    results = load_results(args.results)
+    plan = []
+    for p in args.protocol:
+        if p not in CURVE_BASE:
+            sys.exit(f"error: the curve stage runs {' or '.join(CURVE_BASE)}, not {p}")
+        for scene in args.scene:
+            for method in METHODS:
+                best = chosen_setting(rows_by(results, scene, CURVE_BASE[p], method))
+                settings = [s for s in args.only if applies(method, s)] if args.only else [best] if best else []
+                if not settings:
+                    sys.exit(
+                        f"error: no {CURVE_BASE[p]} sweep result for {scene} {method}; run the sweep or pass --only"
+                    )
+                plan += [(scene, Run(method, PROTOCOLS[p].iters, SEEDS[0], label(p, s))) for s in settings]
+    return plan
+
+
+def curve_table(results: dict[str, dict]) -> list[str]:
+    """Val and test PSNR along each curve run's training, next to the 800-iteration run of the same sizes and setting
+    (does quality hold as the budget grows?)."""
+    lines = []
+    for r in sorted(results.values(), key=lambda r: r["key"]):
+        if "curve" not in r:
+            continue
+        short = rows_by(results, r["scene"], CURVE_BASE[r["protocol"]], r["method"]).get(r["setting"], [])
+        short = [x for x in short if x["seed"] == r["seed"]]
+        steps = " · ".join(f"{int(step)}: {val:.2f} / {test:.2f}" for step, val, test in r["curve"])
+        against = f"{short[0]['val_psnr']:.2f} / {short[0]['psnr']:.2f}" if short else "—"
+        lines.append(f"| {r['scene']} | {r['method']} | `{r['setting']}` | {against} | {steps} |")
+    if not lines:
+        return []
+    return [
+        "Along the budget (the `curve` stage): one run of 3000 iterations, its checkpoints every "
+        f"{CURVE_EVERY} iterations evaluated on val and test, against a run of 800 iterations with the same sizes and "
+        "setting (its schedules are fractions of its own length, so step 800 of the long run is not the short run). "
+        "Val / test PSNR:",
+        "",
+        "| scene | method | setting | 800-iteration run | 3000-iteration run, step: val / test |",
+        "|---|---|---|---|---|",
+        *lines,
+        "",
+    ]
+
+
+def equal_time_lines(results: dict[str, dict]) -> list[str]:
+    """A final cutoff 0.7 costs 1.3 × the wall time at P-CPU: is it better than 1.3 × the iterations without it?"""
+    lines = []
+    for scene, setting in (("lego", "wd0-nodecay"),):
+        longer = rows_by(results, scene, "pcpu1040", "fourierf-vm").get(setting, [])
+        capped = rows_by(results, scene, "pcpu", "fourierf-vm").get(f"{setting}-ffinal0.7", [])
+        if longer and capped:
+            val, test = ([fmt([r[k] for r in rows], 2) for rows in (longer, capped)] for k in ("val_psnr", "psnr"))
+            lines.append(
+                f"- {scene}, fourierf-vm, equal wall time: `{setting}` at 1040 iterations val {val[0]}, test {test[0]} "
+                f"({len(longer)} seeds) against `{setting}-ffinal0.7` at 800 val {val[1]}, test {test[1]} "
+                f"({len(capped)} seeds)"
+            )
+    return lines
+
+
 def report(args: argparse.Namespace) -> list[str]:
     results = load_results(args.results)
     body = section_head(
@@ -259,7 +359,7 @@ def report(args: argparse.Namespace) -> list[str]:
             tables = {m: rows_by(results, scene, p, m) for m in METHODS}
             if not all(tables.values()):
                 continue
-            name = {"pcpu": "P-CPU", "pmid": "P-MID", "pmid800": "P-MID sizes, 800 it."}[p]
+            name = PROTOCOL_NAMES[p]
             picked = {m: chosen_setting(tables[m]) for m in METHODS}
             rows = {m: tables[m][picked[m]] for m in METHODS}
             test = {m: [r["psnr"] for r in rows[m]] for m in METHODS}
@@ -286,7 +386,9 @@ def report(args: argparse.Namespace) -> list[str]:
                 f"- fern, {m}, P-MID sizes, `lr0.08`, 800 → 3000 iterations: val {short[0]['val_psnr']:.2f} → "
                 f"{long[0]['val_psnr']:.2f}, test {short[0]['psnr']:.2f} → {long[0]['psnr']:.2f}"
             )
-    body += ["", "Validation PSNR of every setting tried (the choice above is the best of each column):", ""]
+    body += equal_time_lines(results)
+    body += ["", *curve_table(results)]
+    body += ["Validation PSNR of every setting tried (the choice above is the best of each column):", ""]
     body += ["| scene | protocol | setting | fourierf-vm val | tensorf-vm val |", "|---|---|---|---|---|", *sweeps, ""]
     if (REPO / GRID).is_file():
         body += [
@@ -304,8 +406,9 @@ def report(args: argparse.Namespace) -> list[str]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("stage", choices=("sweep", "seeds", "report"))
-    ap.add_argument("--protocol", nargs="+", choices=tuple(PROTOCOLS), default=list(PROTOCOLS))
+    ap.add_argument("stage", choices=("sweep", "seeds", "curve", "report"))
+    ap.add_argument("--protocol", nargs="+", choices=tuple(PROTOCOLS), default=None,
+                    help="default: pcpu pmid pmid800 (the curve stage: pcpu3000)")  # fmt: skip
     ap.add_argument("--scene", nargs="+", choices=tuple(SETTINGS), default=list(SETTINGS))
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data",
                     help="folder holding blender/lego and llff/fern")  # fmt: skip
@@ -319,6 +422,8 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=None, help="CPU threads per training")
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")
     args = ap.parse_args()
+    if args.protocol is None:
+        args.protocol = ["pcpu3000"] if args.stage == "curve" else ["pcpu", "pmid", "pmid800"]
     known = {name for scene in args.scene for name in SETTINGS[scene]}
     unknown = sorted(set(args.only or ()) - known)
     if unknown:
@@ -332,7 +437,8 @@ def main() -> None:
     for scene in args.scene:
         if not (args.data / ("blender/lego/transforms_train.json" if scene == "lego" else "llff/fern")).exists():
             sys.exit(f"error: {scene} not found under {args.data}; pass --data FOLDER")
-    run_all(sweep_plan(args) if args.stage == "sweep" else seeds_plan(args), args)
+    plans = {"sweep": sweep_plan, "seeds": seeds_plan, "curve": curve_plan}
+    run_all(plans[args.stage](args), args)
 
 
 if __name__ == "__main__":

@@ -68,13 +68,17 @@ def train_and_eval(
     return row | evaluate(run_dir, run.key, work, lpips)
 
 
-def evaluate(run_dir: Path, key: str, work: Path, lpips: Path, split: str = "test") -> dict:
-    """Evaluate a trained run on one split: metrics and timings for its result row (val keys prefixed ``val_``)."""
+def evaluate(
+    run_dir: Path, key: str, work: Path, lpips: Path, split: str = "test", checkpoint: Path | None = None
+) -> dict:
+    """Evaluate a trained run on one split, at its latest checkpoint or ``checkpoint``: metrics and timings for its
+    result row (val keys prefixed ``val_``)."""
     tag = "" if split == "test" else f".{split}"
     eval_json = work / f"{key}{tag}.eval.json"
     eval_cmd = [
         str(BIN / "fourierf-eval"), "--load-config", str(run_dir / "config.json"), "--output-path", str(eval_json),
         "--lpips-weights", str(lpips), "--split", split,
+        *(["--checkpoint", str(checkpoint)] if checkpoint is not None else []),
     ]  # fmt: skip
     eval_s, _, code = run_timed(eval_cmd, work / f"{key}{tag}.eval.log")
     if code != 0:

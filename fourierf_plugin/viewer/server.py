@@ -302,9 +302,9 @@ class ViewerServer:
 
         Every camera move is answered by a preview first: the final size only once the camera has rested *and*
         the screen already shows this camera (at some state of the controls). Without the second condition a move
-        whose preview was abandoned (the browser reported the camera again during it, as it does right after a
-        move) went straight to the final picture once the rest time had passed during the abandoned render: many
-        times a preview's time, and no preview at all for that move."""
+        whose preview was abandoned (the camera moved on during it) went straight to the final picture once the rest
+        time had passed during the abandoned render: many times a preview's time, and no preview at all for that
+        move."""
         now = self.clock()
         with self._lock:
             for view in self._clients.values():

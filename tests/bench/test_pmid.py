@@ -61,3 +61,44 @@ def test_an_unknown_setting_is_one_clear_error(tmp_path: Path) -> None:
     assert done.returncode != 0
     assert "--only wd9: no such setting for lego" in done.stderr and "wd0-nodecay" in done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_a_curve_trains_the_800_iteration_choice_unless_told(pmid: ModuleType, tmp_path: Path) -> None:
+    results = tmp_path / "results.jsonl"
+    rows = [_row("wd0", pmid.SEEDS[0], val=22.0, test=20.0), _row("preset", pmid.SEEDS[0], val=21.0, test=21.0)]
+    tensorf = _row("wd0-nodecay", pmid.SEEDS[0], val=21.5, test=21.0) | {"method": "tensorf-vm"}
+    tensorf["key"] = "lego/tensorf-vm_pcpu-wd0-nodecay_800_s20211202"
+    results.write_text("".join(pmid.json.dumps(r) + "\n" for r in [*rows, tensorf]))
+    args = argparse.Namespace(protocol=["pcpu3000"], scene=["lego"], only=None, results=results)
+    plan = {(r.method, r.views, r.iters) for _, r in pmid.curve_plan(args)}
+    assert plan == {("fourierf-vm", "pcpu3000-wd0", 3000), ("tensorf-vm", "pcpu3000-wd0-nodecay", 3000)}
+    args.only = ["wd0-ramp0.5", "preset"]
+    plan = {(r.method, r.views) for _, r in pmid.curve_plan(args)}
+    assert plan == {("fourierf-vm", "pcpu3000-wd0-ramp0.5"), ("fourierf-vm", "pcpu3000-preset"),
+                    ("tensorf-vm", "pcpu3000-preset")}  # fmt: skip
+    args.protocol = ["pcpu"]
+    with pytest.raises(SystemExit, match="the curve stage runs"):
+        pmid.curve_plan(args)
+
+
+def test_the_curve_table_sets_each_step_beside_the_short_run(pmid: ModuleType) -> None:
+    short = _row("wd0", pmid.SEEDS[0], val=19.5, test=19.0)
+    long = _row("wd0", pmid.SEEDS[0], val=20.25, test=19.75) | {
+        "key": "lego/fourierf-vm_pcpu3000-wd0_3000_s20211202", "protocol": "pcpu3000",
+        "curve": [[500, 18.0, 17.5], [3000, 20.25, 19.75]],
+    }  # fmt: skip
+    table = pmid.curve_table({r["key"]: r for r in (short, long)})
+    row = next(line for line in table if line.startswith("| lego"))
+    assert row == "| lego | fourierf-vm | `wd0` | 19.50 / 19.00 | 500: 18.00 / 17.50 · 3000: 20.25 / 19.75 |"
+    assert pmid.curve_table({short["key"]: short}) == []
+
+
+def test_the_equal_time_line_compares_more_iterations_with_the_final_cutoff(pmid: ModuleType) -> None:
+    longer = _row("wd0-nodecay", pmid.SEEDS[0], val=22.0, test=21.5) | {"protocol": "pcpu1040", "key": "a"}
+    capped = [_row("wd0-nodecay-ffinal0.7", seed, val=22.25, test=22.0) | {"key": f"b{seed}"} for seed in (1, 2)]
+    lines = pmid.equal_time_lines({r["key"]: r for r in (longer, *capped)})
+    assert lines == [
+        "- lego, fourierf-vm, equal wall time: `wd0-nodecay` at 1040 iterations val 22.00, test 21.50 (1 seeds) "
+        "against `wd0-nodecay-ffinal0.7` at 800 val 22.25 ± 0.00, test 22.00 ± 0.00 (2 seeds)"
+    ]
+    assert pmid.equal_time_lines({"a": longer}) == []

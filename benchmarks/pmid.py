@@ -116,6 +116,7 @@ TV_CONST = ["--pipeline.model.tv-decay-ratio", "1.0"]
 OCC_ON = ["--pipeline.effects.occlusion-regularization", "True"]
 RAMP = "--pipeline.model.fourier.ramp-fraction"
 F_FINAL = "--pipeline.model.fourier.f-final"
+FNM = ["--pipeline.model.floaters-gradient-scaling", "True"]
 TV_LOW = ["--pipeline.model.tv-weight-density", "0.1", "--pipeline.model.tv-weight-appearance", "0.1"]
 SETTINGS: dict[str, dict[str, list[str]]] = {
     # Object scenes: the synthetic preset and the levers the issue names (weight decay, lr decay, TV, f0/Δ).
@@ -148,11 +149,13 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-occ0.1": ["--optimizer.lr-grids", "0.08", "--pipeline.model.occlusion-weight", "0.1"],
         "lr0.08-occ0": ["--optimizer.lr-grids", "0.08", "--pipeline.model.occlusion-weight", "0"],
         "lr0.08-ramp0.5": ["--optimizer.lr-grids", "0.08", "--pipeline.model.fourier.ramp-fraction", "0.5"],
-        "lr0.08-fnm": ["--optimizer.lr-grids", "0.08", "--pipeline.model.floaters-gradient-scaling", "True"],
-        "lr0.08-tvconst-fnm": ["--optimizer.lr-grids", "0.08", *TV_CONST,
-                               "--pipeline.model.floaters-gradient-scaling", "True"],
+        "lr0.08-fnm": ["--optimizer.lr-grids", "0.08", *FNM],
+        "lr0.08-tvconst-fnm": ["--optimizer.lr-grids", "0.08", *TV_CONST, *FNM],
         "lr0.08-tvconst-ramp0.5": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.5"],
         "lr0.08-tvconst-ffinal0.7": ["--optimizer.lr-grids", "0.08", *TV_CONST, F_FINAL, "0.7"],
+        # Session 13: with Floaters-No-More keeping density off the cameras, does a shorter band limit pay?
+        "lr0.08-tvconst-fnm-ramp0.5": ["--optimizer.lr-grids", "0.08", *TV_CONST, *FNM, RAMP, "0.5"],
+        "lr0.08-tvconst-fnm-ramp0.25": ["--optimizer.lr-grids", "0.08", *TV_CONST, *FNM, RAMP, "0.25"],
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal")

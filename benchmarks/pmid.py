@@ -73,6 +73,8 @@ SEEDS = (20211202, 1, 2)
 
 @dataclass(frozen=True)
 class Protocol:
+    name: str
+    """How the report names it."""
     iters: int
     rays: int
     init_side: int
@@ -88,22 +90,15 @@ class Protocol:
         ]  # fmt: skip
 
 
-PROTOCOLS = {
-    "pcpu": Protocol(iters=800, rays=1024, init_side=64, final_side=128, lego_downscale=4),
-    "pmid": Protocol(iters=3000, rays=2048, init_side=96, final_side=192, lego_downscale=2),
+PROTOCOLS = {  # name, iterations, rays per batch, initial and final grid side, lego downscale
+    "pcpu": Protocol("P-CPU", 800, 1024, 64, 128, 4),
+    "pmid": Protocol("P-MID", 3000, 2048, 96, 192, 2),
     # P-MID's sizes at P-CPU's 800 iterations: does quality hold as the budget grows from 800 to 3000?
-    "pmid800": Protocol(iters=800, rays=2048, init_side=96, final_side=192, lego_downscale=2),
+    "pmid800": Protocol("P-MID sizes, 800 it.", 800, 2048, 96, 192, 2),
     # P-CPU at 1.3 × its iterations: the wall time of a final cutoff 0.7 at 800 (ab_speed), for an equal-time check.
-    "pcpu1040": Protocol(iters=1040, rays=1024, init_side=64, final_side=128, lego_downscale=4),
+    "pcpu1040": Protocol("P-CPU, 1040 it.", 1040, 1024, 64, 128, 4),
     # P-CPU's sizes at P-MID's 3000 iterations, for the curve along training (the ``curve`` stage only).
-    "pcpu3000": Protocol(iters=3000, rays=1024, init_side=64, final_side=128, lego_downscale=4),
-}
-PROTOCOL_NAMES = {
-    "pcpu": "P-CPU",
-    "pmid": "P-MID",
-    "pmid800": "P-MID sizes, 800 it.",
-    "pcpu1040": "P-CPU, 1040 it.",
-    "pcpu3000": "P-CPU sizes, 3000 it.",
+    "pcpu3000": Protocol("P-CPU sizes, 3000 it.", 3000, 1024, 64, 128, 4),
 }
 CURVE_BASE = {"pcpu3000": "pcpu", "pmid": "pmid800"}
 """A curve's protocol and the 800-iteration protocol of the same sizes, whose val-chosen setting the curve trains."""
@@ -362,7 +357,7 @@ def report(args: argparse.Namespace) -> list[str]:
             tables = {m: rows_by(results, scene, p, m) for m in METHODS}
             if not all(tables.values()):
                 continue
-            name = PROTOCOL_NAMES[p]
+            name = PROTOCOLS[p].name
             picked = {m: chosen_setting(tables[m]) for m in METHODS}
             rows = {m: tables[m][picked[m]] for m in METHODS}
             test = {m: [r["psnr"] for r in rows[m]] for m in METHODS}

@@ -111,6 +111,7 @@ TV_CONST = ["--pipeline.model.tv-decay-ratio", "1.0"]
 OCC_ON = ["--pipeline.effects.occlusion-regularization", "True"]
 RAMP = "--pipeline.model.fourier.ramp-fraction"
 F_FINAL = "--pipeline.model.fourier.f-final"
+F0_DENSITY, F0_COLOR = "--pipeline.model.fourier.f0-density", "--pipeline.model.fourier.f0-color"
 FNM = ["--pipeline.model.floaters-gradient-scaling", "True"]
 TV_LOW = ["--pipeline.model.tv-weight-density", "0.1", "--pipeline.model.tv-weight-appearance", "0.1"]
 SETTINGS: dict[str, dict[str, list[str]]] = {
@@ -133,6 +134,11 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "wd0-nodecay-ffinal0.5": [*WD0, *NO_DECAY, F_FINAL, "0.5"],
         "wd0-nodecay-occ": [*WD0, *NO_DECAY, *OCC_ON],
         "wd0-nodecay-ramp0.5-ffinal0.7": [*WD0, *NO_DECAY, RAMP, "0.5", F_FINAL, "0.7"],
+        # Session 14: the grid learning rate, a wider first band, lighter TV, on the rule's optimiser.
+        "wd0-nodecay-lr0.04": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.04"],
+        "wd0-nodecay-lr0.01": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.01"],
+        "wd0-nodecay-f0.5": [*WD0, *NO_DECAY, F0_DENSITY, "0.5", F0_COLOR, "0.5"],
+        "wd0-nodecay-tv0.1": [*WD0, *NO_DECAY, *TV_LOW],
     },
     # Forward-facing scenes: the real-scene preset (the trainer applies it), its grid lr, the occlusion term, f0/Δ,
     # Floaters-No-More gradient scaling.
@@ -144,6 +150,7 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-occ0.1": ["--optimizer.lr-grids", "0.08", "--pipeline.model.occlusion-weight", "0.1"],
         "lr0.08-occ0": ["--optimizer.lr-grids", "0.08", "--pipeline.model.occlusion-weight", "0"],
         "lr0.08-ramp0.5": ["--optimizer.lr-grids", "0.08", "--pipeline.model.fourier.ramp-fraction", "0.5"],
+        "lr0.08-ramp0.25": ["--optimizer.lr-grids", "0.08", RAMP, "0.25"],
         "lr0.08-fnm": ["--optimizer.lr-grids", "0.08", *FNM],
         "lr0.08-tvconst-fnm": ["--optimizer.lr-grids", "0.08", *TV_CONST, *FNM],
         "lr0.08-tvconst-ramp0.5": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.5"],
@@ -151,6 +158,8 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # Session 13: with Floaters-No-More keeping density off the cameras, does a shorter band limit pay?
         "lr0.08-tvconst-fnm-ramp0.5": ["--optimizer.lr-grids", "0.08", *TV_CONST, *FNM, RAMP, "0.5"],
         "lr0.08-tvconst-fnm-ramp0.25": ["--optimizer.lr-grids", "0.08", *TV_CONST, *FNM, RAMP, "0.25"],
+        # Session 14: at 3000 iterations the band opens only at the end; a quarter of the run opens it by step 750.
+        "lr0.08-tvconst-ramp0.25": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.25"],
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal")
@@ -255,7 +264,7 @@ def sweep_plan(args: argparse.Namespace) -> list[tuple[str, Run]]:
         for p in args.protocol
         for scene in args.scene
         for setting in SETTINGS[scene]
-        for method in METHODS
+        for method in args.methods or METHODS
         if applies(method, setting) and (p != "pmid800" or scene == "fern") and (not args.only or setting in args.only)
     ]
 
@@ -285,7 +294,7 @@ def curve_plan(args: argparse.Namespace) -> list[tuple[str, Run]]:
             for method in METHODS:
                 best = chosen_setting(rows_by(results, scene, CURVE_BASE[p], method))
                 settings = [s for s in args.only if applies(method, s)] if args.only else [best] if best else []
-                if not settings:
+                if not settings and not args.only:  # --only with curriculum settings alone: tensorf-vm has none
                     sys.exit(
                         f"error: no {CURVE_BASE[p]} sweep result for {scene} {method}; run the sweep or pass --only"
                     )
@@ -334,6 +343,26 @@ def equal_time_lines(results: dict[str, dict]) -> list[str]:
                 f"({len(capped)} seeds)"
             )
     return lines
+
+
+RULE_ALONG_THE_BUDGET = (("pcpu", "lr0.08-tvconst"), ("pcpu3000", "lr0.08-tvconst-ramp0.25"))
+"""fern, fourierf-vm: the budget rule's settings at 800 and at 3000 iterations of P-CPU's sizes (the band opens over
+the whole 800-iteration run and over the first 800 of the 3000)."""
+
+
+def rule_along_the_budget(results: dict[str, dict]) -> list[str]:
+    """Does a user's run under the budget rule get better as the budget grows from 800 to 3000 iterations?"""
+    (p_short, short), (p_long, long) = RULE_ALONG_THE_BUDGET
+    short_rows = rows_by(results, "fern", p_short, "fourierf-vm").get(short, [])
+    long_rows = rows_by(results, "fern", p_long, "fourierf-vm").get(long, [])
+    short_rows = [r for r in short_rows if r["seed"] == SEEDS[0]]
+    if not (short_rows and long_rows):
+        return []
+    a, b = short_rows[0], long_rows[0]
+    return [
+        f"- fern, fourierf-vm, the budget rule's settings at P-CPU sizes: `{short}` at 800 iterations val "
+        f"{a['val_psnr']:.2f}, test {a['psnr']:.2f} → `{long}` at 3000 val {b['val_psnr']:.2f}, test {b['psnr']:.2f}"
+    ]
 
 
 def report(args: argparse.Namespace) -> list[str]:
@@ -385,6 +414,7 @@ def report(args: argparse.Namespace) -> list[str]:
                 f"{long[0]['val_psnr']:.2f}, test {short[0]['psnr']:.2f} → {long[0]['psnr']:.2f}"
             )
     body += equal_time_lines(results)
+    body += rule_along_the_budget(results)
     body += ["", *curve_table(results)]
     body += ["Validation PSNR of every setting tried (the choice above is the best of each column):", ""]
     body += ["| scene | protocol | setting | fourierf-vm val | tensorf-vm val |", "|---|---|---|---|---|", *sweeps, ""]
@@ -416,6 +446,7 @@ def main() -> None:
                     help="one row per finished run (the report reads it; finished runs are skipped)")  # fmt: skip
     ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
     ap.add_argument("--only", nargs="+", default=None, help="sweep only these settings (names from SETTINGS)")
+    ap.add_argument("--methods", nargs="+", choices=METHODS, default=None, help="sweep only these methods")
     ap.add_argument("--jobs", type=int, default=1, help="trainings at once")
     ap.add_argument("--threads", type=int, default=None, help="CPU threads per training")
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")

@@ -60,13 +60,24 @@ def finalize(config: TrainerConfig) -> tuple[TrainerConfig, list[str]]:
         if kept:
             notes.append(f"  kept your settings for: {', '.join(kept)}")
     config.scene_preset = preset
-    notes += size_the_run(config, all_methods.get(config.method_name), not declared.bounded)
-    notes += apply_budget_rule(config, all_methods.get(config.method_name))
+    reference = preset_under_scene(all_methods.get(config.method_name), preset)
+    notes += size_the_run(config, reference, not declared.bounded)
+    notes += apply_budget_rule(config, reference)
     resolve_tv_decay(config)
     effects = config.pipeline.effects.resolve(declared)
     config.pipeline.effects = EffectsConfig.of(effects)
     notes.append(f"scene effects: {effects.describe()} (the scene declares: {declared.describe()})")
     return config, notes
+
+
+def preset_under_scene(pristine: TrainerConfig | None, preset: str) -> TrainerConfig | None:
+    """The method preset as the scene preset leaves it: what "a value the user left alone" means to the rules applied
+    after the scene preset (the real-scene preset's ramp is not a user's setting that the budget rule must keep)."""
+    if pristine is None or preset != "real":
+        return pristine
+    reference = copy.deepcopy(pristine)
+    apply_real_scene_preset(reference, None)
+    return reference
 
 
 def resolve_tv_decay(config: TrainerConfig) -> None:

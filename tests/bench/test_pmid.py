@@ -41,14 +41,16 @@ def test_the_choice_reads_validation_only(pmid: ModuleType) -> None:
 
 
 def test_plans_skip_curriculum_settings_for_tensorf_and_keep_only(pmid: ModuleType) -> None:
-    args = argparse.Namespace(protocol=["pcpu"], scene=["lego"], only=["wd0", "wd0-ramp0.5"])
+    args = argparse.Namespace(protocol=["pcpu"], scene=["lego"], only=["wd0", "wd0-ramp0.5"], methods=None)
     plan = {(r.method, r.views) for _, r in pmid.sweep_plan(args)}
     assert plan == {("fourierf-vm", "pcpu-wd0"), ("tensorf-vm", "pcpu-wd0"), ("fourierf-vm", "pcpu-wd0-ramp0.5")}
-    args = argparse.Namespace(protocol=["pcpu"], scene=["lego"], only=["wd0-nodecay-ffinal0.7", "wd0-nodecay-occ"])
+    args.only = ["wd0-nodecay-ffinal0.7", "wd0-nodecay-occ"]
     plan = {(r.method, r.views) for _, r in pmid.sweep_plan(args)}
     assert ("tensorf-vm", "pcpu-wd0-nodecay-ffinal0.7") not in plan, "a final cutoff is a curriculum setting"
     assert ("tensorf-vm", "pcpu-wd0-nodecay-occ") in plan
-    args = argparse.Namespace(protocol=["pmid800"], scene=["lego", "fern"], only=None)
+    args.methods = ["fourierf-vm"]
+    assert {r.method for _, r in pmid.sweep_plan(args)} == {"fourierf-vm"}, "--methods keeps the others out"
+    args = argparse.Namespace(protocol=["pmid800"], scene=["lego", "fern"], only=None, methods=None)
     assert {scene for scene, _ in pmid.sweep_plan(args)} == {"fern"}, "P-MID at 800 iterations is fern's check"
 
 
@@ -76,6 +78,8 @@ def test_a_curve_trains_the_800_iteration_choice_unless_told(pmid: ModuleType, t
     plan = {(r.method, r.views) for _, r in pmid.curve_plan(args)}
     assert plan == {("fourierf-vm", "pcpu3000-wd0-ramp0.5"), ("fourierf-vm", "pcpu3000-preset"),
                     ("tensorf-vm", "pcpu3000-preset")}  # fmt: skip
+    args.only = ["wd0-ramp0.5"]  # curriculum settings alone: tensorf-vm has nothing to run, and that is no error
+    assert {(r.method, r.views) for _, r in pmid.curve_plan(args)} == {("fourierf-vm", "pcpu3000-wd0-ramp0.5")}
     args.protocol = ["pcpu"]
     with pytest.raises(SystemExit, match="the curve stage runs"):
         pmid.curve_plan(args)
@@ -102,3 +106,18 @@ def test_the_equal_time_line_compares_more_iterations_with_the_final_cutoff(pmid
         "against `wd0-nodecay-ffinal0.7` at 800 val 22.25 ± 0.00, test 22.00 ± 0.00 (2 seeds)"
     ]
     assert pmid.equal_time_lines({"a": longer}) == []
+
+
+def test_the_rule_line_sets_the_rules_800_iteration_run_beside_its_3000(pmid: ModuleType) -> None:
+    (p_short, short), (p_long, long) = pmid.RULE_ALONG_THE_BUDGET
+    rows = [
+        _row(short, pmid.SEEDS[0], val=19.5, test=19.0) | {"scene": "fern", "protocol": p_short},
+        _row(long, pmid.SEEDS[0], val=21.0, test=20.5) | {"scene": "fern", "protocol": p_long, "key": "fern/long"},
+    ]
+    rows[0]["key"] = "fern/short"
+    line = pmid.rule_along_the_budget({r["key"]: r for r in rows})
+    assert line == [
+        f"- fern, fourierf-vm, the budget rule's settings at P-CPU sizes: `{short}` at 800 iterations val 19.50, "
+        f"test 19.00 → `{long}` at 3000 val 21.00, test 20.50"
+    ]
+    assert pmid.rule_along_the_budget({"fern/short": rows[0]}) == [], "no 3000-iteration run: no line"

@@ -8,7 +8,12 @@ from pathlib import Path
 import pytest
 
 from fourierf_plugin.method_configs import all_methods, finalize
-from fourierf_plugin.method_configs.budget import PAPER_ITERATIONS, SHORT_RUN_SETTINGS, short_run_settings
+from fourierf_plugin.method_configs.budget import (
+    PAPER_ITERATIONS,
+    REAL_RAMP_ITERATIONS,
+    SHORT_RUN_SETTINGS,
+    short_run_settings,
+)
 from fourierf_plugin.scripts.train import parse_args
 from tests.helpers import TINY_SCENE
 from tests.scenes import write_llff_scene
@@ -34,6 +39,11 @@ def test_rule_is_a_function_of_the_iteration_count() -> None:
         "pipeline.model.tv_decay_ratio": 1.0,
     }
     assert short_run_settings("tensorf-vm", "real", 800) == {"optimizer.lr_grids": 0.08}
+    ramp = "pipeline.model.fourier.ramp_fraction"
+    assert short_run_settings("fourierf-vm", "real", 3000)[ramp] == 0.2667, "the band opens by step 800"
+    assert round(0.2667 * 3000) == REAL_RAMP_ITERATIONS
+    assert ramp not in short_run_settings("tensorf-vm", "real", 3000), "no band to open"
+    assert ramp not in short_run_settings("fourierf-vm", "synthetic", 3000)
     assert short_run_settings("zerorf-vm", "real", 800) == {}
     # the table is not handed out for mutation
     short_run_settings("fourierf-vm", "real", 800)["optimizer.lr_grids"] = 1.0
@@ -82,3 +92,16 @@ def test_forward_facing_short_run_gets_the_faster_grid_rate(llff_scene: Path, me
     assert config.pipeline.model.tv_decay_ratio == (1.0 if method == "fourierf-vm" else 0.1)
     long_run, _ = finished(method, llff_scene, "--max-num-iterations", str(PAPER_ITERATIONS + 2000))
     assert long_run.optimizer.lr_grids == 0.02
+
+
+def test_a_longer_forward_facing_run_opens_the_band_by_step_800(llff_scene: Path) -> None:
+    config, notes = finished("fourierf-vm", llff_scene, "--max-num-iterations", "3000")
+    assert config.pipeline.model.fourier.ramp_fraction == 0.2667, "the real-scene preset's ramp is not a user's"
+    assert any(n.startswith("budget rule") and "ramp_fraction=0.2667" in n for n in notes)
+    mine, notes = finished(
+        "fourierf-vm", llff_scene, "--max-num-iterations", "3000", "--pipeline.model.fourier.ramp-fraction", "0.5"
+    )
+    assert mine.pipeline.model.fourier.ramp_fraction == 0.5
+    assert any("kept your pipeline.model.fourier.ramp_fraction" in n for n in notes)
+    short, _ = finished("fourierf-vm", llff_scene, "--max-num-iterations", str(REAL_RAMP_ITERATIONS))
+    assert short.pipeline.model.fourier.ramp_fraction == 1.0, "a short run keeps the whole-run ramp that won at 800"

@@ -139,6 +139,7 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "wd0-nodecay-lr0.01": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.01"],
         "wd0-nodecay-f0.5": [*WD0, *NO_DECAY, F0_DENSITY, "0.5", F0_COLOR, "0.5"],
         "wd0-nodecay-tv0.1": [*WD0, *NO_DECAY, *TV_LOW],
+        "wd0-nodecay-lr0.04-ramp0.5": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.04", RAMP, "0.5"],
     },
     # Forward-facing scenes: the real-scene preset (the trainer applies it), its grid lr, the occlusion term, f0/Δ,
     # Floaters-No-More gradient scaling.
@@ -274,7 +275,7 @@ def seeds_plan(args: argparse.Namespace) -> list[tuple[str, Run]]:
     plan = []
     for p in args.protocol:
         for scene in args.scene:
-            for method in METHODS:
+            for method in args.methods or METHODS:
                 best = chosen_setting(rows_by(results, scene, p, method))
                 if best is None:
                     sys.exit(f"error: no sweep result for {scene} {p} {method}; run the sweep stage first")
@@ -446,7 +447,7 @@ def main() -> None:
                     help="one row per finished run (the report reads it; finished runs are skipped)")  # fmt: skip
     ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
     ap.add_argument("--only", nargs="+", default=None, help="sweep only these settings (names from SETTINGS)")
-    ap.add_argument("--methods", nargs="+", choices=METHODS, default=None, help="sweep only these methods")
+    ap.add_argument("--methods", nargs="+", choices=METHODS, default=None, help="sweep or seed only these methods")
     ap.add_argument("--jobs", type=int, default=1, help="trainings at once")
     ap.add_argument("--threads", type=int, default=None, help="CPU threads per training")
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")

@@ -87,6 +87,16 @@ def cli_exit_code(main: Callable[[list[str]], object], args: list[str]) -> int:
     return info.value.code
 
 
+def cli_outcome(main: Callable[[list[str]], object], args: list[str]) -> int:
+    """The exit code of a console script's ``main(args)`` run the way its entry point does: 0 when it returns, the
+    code it exits with otherwise (for commands whose success and clear failure are both acceptable outcomes)."""
+    try:
+        run_cli(lambda: main(args), args)
+    except SystemExit as end:
+        return int(end.code or 0)
+    return 0
+
+
 class FakeClock:
     """A clock that stands still until told (``clock.now += 2``), to monkeypatch over ``time.perf_counter``; it
     counts how often it was read."""

@@ -121,3 +121,15 @@ def test_the_rule_line_sets_the_rules_800_iteration_run_beside_its_3000(pmid: Mo
         f"test 19.00 → `{long}` at 3000 val 21.00, test 20.50"
     ]
     assert pmid.rule_along_the_budget({"fern/short": rows[0]}) == [], "no 3000-iteration run: no line"
+
+
+def test_seeds_run_the_val_choice_on_the_later_seeds(pmid: ModuleType, tmp_path: Path) -> None:
+    results = tmp_path / "results.jsonl"
+    rows = [_row("wd0", pmid.SEEDS[0], val=22.0, test=20.0), _row("preset", pmid.SEEDS[0], val=21.0, test=23.0)]
+    results.write_text("".join(pmid.json.dumps(r) + "\n" for r in rows))
+    args = argparse.Namespace(protocol=["pcpu"], scene=["lego"], results=results, methods=["fourierf-vm"])
+    plan = [(r.method, r.views, r.seed) for _, r in pmid.seeds_plan(args)]
+    assert plan == [("fourierf-vm", "pcpu-wd0", seed) for seed in pmid.SEEDS[1:]]
+    args.methods = None  # tensorf-vm has no sweep row: one clear error
+    with pytest.raises(SystemExit, match="no sweep result for lego pcpu tensorf-vm"):
+        pmid.seeds_plan(args)

@@ -65,6 +65,7 @@ def without_decisions(config: TrainerConfig) -> dict:
     data["pipeline"]["model"]["field"].pop("n_voxels_init")
     data["pipeline"]["model"]["field"].pop("n_voxels_final")
     data["pipeline"]["model"].pop("tv_decay_ratio")
+    data["pipeline"]["model"]["fourier"].pop("ramp_fraction")
     data["optimizer"].pop("weight_decay")
     data["optimizer"].pop("lr_grids")
     data["optimizer"].pop("lr_decay_ratio")
@@ -89,7 +90,9 @@ def test_blender_scene_keeps_the_synthetic_preset_and_gets_its_declared_effects(
     assert without_decisions(config) == without_decisions(given), "a bounded scene changes no setting"
     assert config.pipeline.effects == EffectsConfig.of(BLENDER_DECLARATION)
     assert notes[0].startswith("run size for 4 view(s) of 100x100 on cpu: ")
-    assert notes[1].startswith("budget rule (800 < 10000 iterations): weight_decay=0.0, lr_decay_ratio=1.0")
+    assert notes[1].startswith(
+        "budget rule (800 < 10000 iterations): weight_decay=0.0, lr_decay_ratio=1.0, lr_grids=0.04, ramp_fraction=0.5"
+    )
     assert notes[2:] == [
         "scene effects: background=white, rays=euclidean, view-dependent=no, occlusion-regularisation=no "
         "(the scene declares: background=white, rays=euclidean, view-dependent=no, occlusion-regularisation=no, "

@@ -63,6 +63,13 @@ def test_an_unknown_setting_is_one_clear_error(tmp_path: Path) -> None:
     assert done.returncode != 0
     assert "--only wd9: no such setting for lego" in done.stderr and "wd0-nodecay" in done.stderr
     assert "Traceback" not in done.stderr
+    done = subprocess.run(
+        [sys.executable, str(SCRIPT), "sweep", "--methods", "nerf", "--work", str(tmp_path)],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode != 0 and "Traceback" not in done.stderr
+    assert "--methods" in done.stderr and "invalid choice: 'nerf'" in done.stderr and "fourierf-vm" in done.stderr
 
 
 def test_a_curve_trains_the_800_iteration_choice_unless_told(pmid: ModuleType, tmp_path: Path) -> None:

@@ -29,7 +29,6 @@ import torch
 from fourierf_plugin.engine.checkpoint import list_checkpoints, load_checkpoint, load_latest_checkpoint, save_checkpoint
 from fourierf_plugin.engine.run_dir import MAX_NAME_LEN, unique_safe_name
 from fourierf_plugin.field_components import schedules
-from fourierf_plugin.method_configs.budget import ramp_fraction
 from fourierf_plugin.scripts import eval as eval_script
 from fourierf_plugin.scripts import render as render_script
 from fourierf_plugin.scripts import train as train_script
@@ -180,7 +179,8 @@ def test_loss_curve_and_cutoff_schedule_continue_across_the_kills(resumed: Kille
     reference = {r["step"]: r for r in logged if "event" not in r}
     steps = [r["step"] for r in records if "event" not in r]
     assert sorted(set(steps)) == list(range(1, ITERS + 1))
-    ramp = round((ramp_fraction("synthetic", ITERS) or 0.2) * ITERS)  # the budget rule's, else the preset's
+    saved = json.loads((resumed.run_dir / "config.json").read_text())["config"]
+    ramp = round(saved["pipeline"]["model"]["fourier"]["ramp_fraction"] * ITERS)  # the run's (the budget rule's)
     for r in records[:-1]:
         expected = reference[r["step"]]
         assert r["f_density"] == pytest.approx(schedules.cutoff_at(r["step"] - 1, 0.3, ramp))

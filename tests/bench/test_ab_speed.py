@@ -1,0 +1,66 @@
+"""benchmarks/ab_speed.py's report on made-up timings: medians per side and their ratios, each run listed, and a
+missing record is one clear error (the A/B itself needs two trainings per pair: the benchmark, not the tests)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+from tests.helpers import load_benchmark
+
+SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "ab_speed.py"
+
+
+@pytest.fixture(scope="module")
+def ab_speed() -> ModuleType:
+    return load_benchmark("ab_speed")
+
+
+def _rows() -> list[dict]:
+    def row(label: str, seed: int, wall: float, psnr: float) -> dict:
+        side = label.split("-")[0]
+        return {"label": label, "seed": seed, "side": side, "train_wall_s": wall, "final_s_per_it": wall / 1000,
+                "render_s": 3.0, "psnr": psnr}  # fmt: skip
+
+    return [row("old-0", 1, 80.0, 21.0), row("new-0", 1, 90.0, 21.5), row("new-1", 2, 70.0, 21.25),
+            row("old-1", 2, 100.0, 22.0)]  # fmt: skip
+
+
+META = {"old": "abc", "new": "working tree", "describe": "a test", "pairs": 2, "seeds": [1, 2], "command": "cmd"}
+
+
+def test_the_summary_gives_medians_their_ratio_and_every_run(ab_speed: ModuleType) -> None:
+    lines = ab_speed.summary(_rows(), {"old": [0.1, 0.3], "new": [0.1, 0.1]}, META)
+    whole = next(line for line in lines if line.startswith("| whole training run"))
+    assert whole == "| whole training run, s (80.0 / 100.0 · 90.0 / 70.0) | 90.0 | 80.0 | 0.89 |"
+    in_process = next(line for line in lines if "in-process" in line)
+    assert in_process.endswith("| 0.2000 | 0.1000 | 0.50 |")
+    assert "- test PSNR new: 21.50 (seed 1), 21.25 (seed 2)" in lines
+    assert lines[0] == "old = `abc`, new = `working tree`: a test"
+
+
+def test_the_report_rewrites_its_section_from_the_record(ab_speed: ModuleType, tmp_path: Path) -> None:
+    (tmp_path / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in _rows()))
+    (tmp_path / "iterations.json").write_text(json.dumps({"old": [0.2], "new": [0.1]}))
+    (tmp_path / "meta.json").write_text(json.dumps(META))
+    markdown = tmp_path / "BENCHMARKS.md"
+    markdown.write_text("# Benchmarks\n\n" + ab_speed.BEGIN + "\nold text\n" + ab_speed.END + "\n\n## After\n")
+    ab_speed.write_report(tmp_path, markdown)
+    text = markdown.read_text()
+    assert "old text" not in text and "| 90.0 | 80.0 | 0.89 |" in text and text.endswith("## After\n")
+
+
+def test_a_report_without_a_recorded_ab_is_one_clear_error(tmp_path: Path) -> None:
+    done = subprocess.run(
+        [sys.executable, str(SCRIPT), "--report", "--work", str(tmp_path), "--markdown", str(tmp_path / "B.md")],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode != 0 and "Traceback" not in done.stderr
+    assert f"no A/B recorded in {tmp_path}" in done.stderr and "results.jsonl" in done.stderr
+    assert not (tmp_path / "B.md").exists()

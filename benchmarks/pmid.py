@@ -111,8 +111,10 @@ TV_CONST = ["--pipeline.model.tv-decay-ratio", "1.0"]
 OCC_ON = ["--pipeline.effects.occlusion-regularization", "True"]
 RAMP = "--pipeline.model.fourier.ramp-fraction"
 F_FINAL = "--pipeline.model.fourier.f-final"
+F_FINAL_COLOR = "--pipeline.model.fourier.f-final-color"
 F0_DENSITY, F0_COLOR = "--pipeline.model.fourier.f0-density", "--pipeline.model.fourier.f0-color"
 FNM = ["--pipeline.model.floaters-gradient-scaling", "True"]
+RULE_LEGO = [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.04"]
 TV_LOW = ["--pipeline.model.tv-weight-density", "0.1", "--pipeline.model.tv-weight-appearance", "0.1"]
 SETTINGS: dict[str, dict[str, list[str]]] = {
     # Object scenes: the synthetic preset and the levers the issue names (weight decay, lr decay, TV, f0/Δ).
@@ -140,6 +142,20 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "wd0-nodecay-f0.5": [*WD0, *NO_DECAY, F0_DENSITY, "0.5", F0_COLOR, "0.5"],
         "wd0-nodecay-tv0.1": [*WD0, *NO_DECAY, *TV_LOW],
         "wd0-nodecay-lr0.04-ramp0.5": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.04", RAMP, "0.5"],
+        # Session 15: the curriculum's own levers on the rule's settings (density and colour bands apart, a longer
+        # ramp, a final cutoff), and a higher grid lr for both.
+        "wd0-nodecay-lr0.04-ramp0.5-f0d0.1": [*RULE_LEGO, RAMP, "0.5", F0_DENSITY, "0.1"],
+        "wd0-nodecay-lr0.04-ramp0.5-f0c0.1": [*RULE_LEGO, RAMP, "0.5", F0_COLOR, "0.1"],
+        "wd0-nodecay-lr0.04-ramp0.65": [*RULE_LEGO, RAMP, "0.65"],
+        "wd0-nodecay-lr0.04-ramp0.5-ffinal0.85": [*RULE_LEGO, RAMP, "0.5", F_FINAL, "0.85"],
+        "wd0-nodecay-lr0.06": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.06"],
+        "wd0-nodecay-lr0.06-ramp0.5": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.06", RAMP, "0.5"],
+        "wd0-nodecay-lr0.04-ramp0.8": [*RULE_LEGO, RAMP, "0.8"],
+        "wd0-nodecay-lr0.04-ramp1": [*RULE_LEGO, RAMP, "1.0"],
+        "wd0-nodecay-lr0.04-ramp0.65-ffinal0.85": [*RULE_LEGO, RAMP, "0.65", F_FINAL, "0.85"],
+        # The geometry alone band-limited for good (appearance opens fully): a quarter of the filtering's cost.
+        "wd0-nodecay-lr0.04-ramp0.5-ffinald0.7": [*RULE_LEGO, RAMP, "0.5", F_FINAL, "0.7", F_FINAL_COLOR, "1.0"],
+        "wd0-nodecay-lr0.04-ramp0.5-ffinald0.5": [*RULE_LEGO, RAMP, "0.5", F_FINAL, "0.5", F_FINAL_COLOR, "1.0"],
     },
     # Forward-facing scenes: the real-scene preset (the trainer applies it), its grid lr, the occlusion term, f0/Δ,
     # Floaters-No-More gradient scaling.
@@ -253,10 +269,31 @@ def rows_by(results: dict[str, dict], scene: str, protocol: str, method: str) ->
 
 
 def chosen_setting(groups: dict[str, list[dict]]) -> str | None:
-    """The setting with the best validation PSNR of the first seed (the sweep's seed)."""
+    """The setting with the best mean validation PSNR over ``SEEDS`` among those run on every seed (the seeds stage
+    runs the sweep's leaders), else the best validation PSNR of the first seed (the sweep's seed).
+
+    Why the mean where there is one: one seed's val PSNR moves by about 0.15 dB from seed to seed, so the best of
+    many single-seed settings is mostly the luckiest (lego P-CPU: four settings within 0.03 dB of each other over
+    three seeds spanned 22.37-22.58 on the first)."""
+    seeded = {
+        s: [r["val_psnr"] for r in rows if r["seed"] in SEEDS]
+        for s, rows in groups.items()
+        if {r["seed"] for r in rows} >= set(SEEDS)
+    }
+    if seeded:
+        return max(seeded, key=lambda s: float(np.mean(seeded[s])))
     first = {s: [r for r in rows if r["seed"] == SEEDS[0]] for s, rows in groups.items()}
     scored = {s: rows[0]["val_psnr"] for s, rows in first.items() if rows}
     return max(scored, key=scored.__getitem__) if scored else None
+
+
+def val_cell(rows: list[dict]) -> str:
+    """A setting's val PSNR for the sweep table: the first seed's, and the mean over every seed where all were run."""
+    first_seed = [r["val_psnr"] for r in rows if r["seed"] == SEEDS[0]]
+    first = fmt(first_seed, 2) if first_seed else "—"
+    if {r["seed"] for r in rows} >= set(SEEDS):
+        return f"{first} (seeds: {np.mean([r['val_psnr'] for r in rows if r['seed'] in SEEDS]):.2f})"
+    return first
 
 
 def sweep_plan(args: argparse.Namespace) -> list[tuple[str, Run]]:
@@ -276,10 +313,16 @@ def seeds_plan(args: argparse.Namespace) -> list[tuple[str, Run]]:
     for p in args.protocol:
         for scene in args.scene:
             for method in args.methods or METHODS:
-                best = chosen_setting(rows_by(results, scene, p, method))
-                if best is None:
-                    sys.exit(f"error: no sweep result for {scene} {p} {method}; run the sweep stage first")
-                plan += [(scene, Run(method, PROTOCOLS[p].iters, s, label(p, best))) for s in SEEDS[1:]]
+                if args.only:  # the seeds of named settings, so that val can choose on more than one seed
+                    settings = [s for s in args.only if applies(method, s)]
+                else:
+                    best = chosen_setting(rows_by(results, scene, p, method))
+                    if best is None:
+                        sys.exit(f"error: no sweep result for {scene} {p} {method}; run the sweep stage first")
+                    settings = [best]
+                plan += [
+                    (scene, Run(method, PROTOCOLS[p].iters, seed, label(p, s))) for s in settings for seed in SEEDS[1:]
+                ]
     return plan
 
 
@@ -371,8 +414,9 @@ def report(args: argparse.Namespace) -> list[str]:
     body = section_head(
         "Few-shot quality at two budgets: P-CPU and P-MID, settings chosen on val",
         "python benchmarks/pmid.py sweep|seeds|report",
-        "Protocols and settings: the script's docstring. Each method at its own val-chosen setting (best val PSNR "
-        f"of seed {SEEDS[0]}); test PSNR of that setting only, mean ± std over the seeds run. PSNRs agree across "
+        "Protocols and settings: the script's docstring. Each method at its own val-chosen setting (best mean val PSNR "
+        f"over seeds {', '.join(map(str, SEEDS))} among the settings run on all of them, else best val PSNR of seed "
+        f"{SEEDS[0]}); test PSNR of that setting only, mean ± std over the seeds run. PSNRs agree across "
         "devices up to float rounding and random streams. Training seconds are the device's and were taken while other "
         "work shared the machine: they are no speed measurement (the speed benchmarks are the interleaved ones).",
     )
@@ -400,10 +444,7 @@ def report(args: argparse.Namespace) -> list[str]:
                 f"{secs['fourierf-vm']:.0f} / {secs['tensorf-vm']:.0f} |"
             )
             for s in SETTINGS[scene]:
-                vals = [
-                    fmt([r["val_psnr"] for r in tables[m][s] if r["seed"] == SEEDS[0]], 2) if s in tables[m] else "—"
-                    for m in METHODS
-                ]
+                vals = [val_cell(tables[m][s]) if s in tables[m] else "—" for m in METHODS]
                 if vals != ["—", "—"]:
                     sweeps.append(f"| {scene} | {name} | {s} | " + " | ".join(vals) + " |")
     body += [*summary, ""]
@@ -417,7 +458,11 @@ def report(args: argparse.Namespace) -> list[str]:
     body += equal_time_lines(results)
     body += rule_along_the_budget(results)
     body += ["", *curve_table(results)]
-    body += ["Validation PSNR of every setting tried (the choice above is the best of each column):", ""]
+    body += [
+        f"Validation PSNR of every setting tried, seed {SEEDS[0]}, and the mean over all {len(SEEDS)} seeds where "
+        "they were run (the choice above is the best mean of each column, else its best first seed):",
+        "",
+    ]
     body += ["| scene | protocol | setting | fourierf-vm val | tensorf-vm val |", "|---|---|---|---|---|", *sweeps, ""]
     if (REPO / GRID).is_file():
         body += [

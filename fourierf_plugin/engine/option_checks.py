@@ -73,6 +73,12 @@ RULES: tuple[Rule, ...] = (
     Rule(f"{_MODEL}.fourier.f0_density", within(0.0, 1.0), "a cutoff in [0, 1] (0 keeps only DC, 1 all)", "0.3"),
     Rule(f"{_MODEL}.fourier.f0_color", within(0.0, 1.0), "a cutoff in [0, 1] (0 keeps only DC, 1 all)", "0.3"),
     Rule(f"{_MODEL}.fourier.f_final", within(1e-3, 1.0), "a cutoff in (0, 1] (1: the whole spectrum)", "1.0"),
+    Rule(
+        f"{_MODEL}.fourier.f_final_color",
+        optional(within(1e-3, 1.0)),
+        "a cutoff in (0, 1] (or omitted: the final cutoff's)",
+        "1.0",
+    ),
     Rule(f"{_MODEL}.fourier.ramp_fraction", at_least(0.0), "a fraction of the run >= 0", "0.2"),
     Rule(f"{_MODEL}.fourier.plane_leakage", at_least(0.0), "a weight >= 0", "0"),
     Rule(f"{_MODEL}.step_ratio", positive, "a number of voxels > 0", "0.5"),
@@ -153,13 +159,14 @@ def check_zerorf_options(config: Any) -> None:
 
 def check_final_cutoff(fourier: Any) -> None:
     """The band only opens: an initial cutoff above the final one is a contradiction, not a schedule."""
-    for name in ("f0_density", "f0_color"):
-        f0 = getattr(fourier, name)
-        if fourier.enabled and f0 > fourier.f_final:
-            final_flag = flag_of(f"{_MODEL}.fourier.f_final")
+    own_color_final = fourier.f_final_color is not None
+    pairs = (("f0_density", "f_final"), ("f0_color", "f_final_color" if own_color_final else "f_final"))
+    for name, final_name in pairs:
+        f0, final = getattr(fourier, name), getattr(fourier, final_name)
+        if fourier.enabled and f0 > final:
+            final_flag = flag_of(f"{_MODEL}.fourier.{final_name}")
             fail(
-                f"{flag_of(f'{_MODEL}.fourier.{name}')} {f0} is above {final_flag} {fourier.f_final}: the cutoff only"
-                " grows",
+                f"{flag_of(f'{_MODEL}.fourier.{name}')} {f0} is above {final_flag} {final}: the cutoff only grows",
                 f"pass {final_flag} {f0} or more, or a smaller initial cutoff",
             )
 

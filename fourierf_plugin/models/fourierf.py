@@ -66,10 +66,18 @@ class FourierConfig:
     f_final: float = 1.0
     """Cutoff the ramp ends at and keeps (paper: 1, the whole spectrum). Below 1 the field stays band-limited, so it
     cannot drift to the masks-off solution once the ramp is over (the paper: for large Δ it converges to TensoRF)."""
+    f_final_color: float | None = None
+    """Final cutoff of the appearance grids; None: ``f_final``. With ``f_final`` < 1 and this 1, only the geometry
+    stays band-limited, and the field filters a quarter of the channels once the ramp is over (16 of 64 per plane)."""
     plane_leakage: float = 0.0
     """Weight kept on out-of-band plane coefficients; the paper zeroes them, the official code keeps 1e-6."""
     app_planes_follow_density: bool = False
     """Official-code behaviour: appearance planes use the density cutoff instead of the colour cutoff."""
+
+
+def final_color_cutoff(fourier: FourierConfig) -> float:
+    """The cutoff the appearance grids' ramp ends at: their own final cutoff where set, else the shared one."""
+    return fourier.f_final if fourier.f_final_color is None else fourier.f_final_color
 
 
 def occlusion_penalty(sigma: Tensor, fraction: float, distance_scale: float) -> Tensor:
@@ -158,7 +166,7 @@ class FourieRFModel(nn.Module):
         ramp = round(fc.ramp_fraction * self.max_iters)
         return (
             schedules.cutoff_at(step, fc.f0_density, ramp, fc.f_final),
-            schedules.cutoff_at(step, fc.f0_color, ramp, fc.f_final),
+            schedules.cutoff_at(step, fc.f0_color, ramp, final_color_cutoff(fc)),
         )
 
     def reset_steps(self) -> list[int]:

@@ -40,6 +40,21 @@ def test_the_choice_reads_validation_only(pmid: ModuleType) -> None:
     assert pmid.chosen_setting({}) is None
 
 
+def test_settings_run_on_every_seed_are_chosen_by_their_mean_val(pmid: ModuleType) -> None:
+    first, *later = pmid.SEEDS
+    rows = [
+        _row("lucky", first, val=22.6, test=30.0),  # best first seed, worst mean: the mean decides
+        *[_row("lucky", seed, val=22.0, test=30.0) for seed in later],
+        _row("steady", first, val=22.4, test=10.0),
+        *[_row("steady", seed, val=22.4, test=10.0) for seed in later],
+        _row("one-seed", first, val=23.0, test=30.0),  # not run on every seed: out of the mean's race
+    ]
+    groups = pmid.rows_by({r["key"]: r for r in rows}, "lego", "pcpu", "fourierf-vm")
+    assert pmid.chosen_setting(groups) == "steady"
+    assert pmid.val_cell(groups["lucky"]) == "22.60 (seeds: 22.20)"
+    assert pmid.val_cell(groups["one-seed"]) == "23.00"
+
+
 def test_plans_skip_curriculum_settings_for_tensorf_and_keep_only(pmid: ModuleType) -> None:
     args = argparse.Namespace(protocol=["pcpu"], scene=["lego"], only=["wd0", "wd0-ramp0.5"], methods=None)
     plan = {(r.method, r.views) for _, r in pmid.sweep_plan(args)}
@@ -134,9 +149,17 @@ def test_seeds_run_the_val_choice_on_the_later_seeds(pmid: ModuleType, tmp_path:
     results = tmp_path / "results.jsonl"
     rows = [_row("wd0", pmid.SEEDS[0], val=22.0, test=20.0), _row("preset", pmid.SEEDS[0], val=21.0, test=23.0)]
     results.write_text("".join(pmid.json.dumps(r) + "\n" for r in rows))
-    args = argparse.Namespace(protocol=["pcpu"], scene=["lego"], results=results, methods=["fourierf-vm"])
+    args = argparse.Namespace(protocol=["pcpu"], scene=["lego"], results=results, methods=["fourierf-vm"], only=None)
     plan = [(r.method, r.views, r.seed) for _, r in pmid.seeds_plan(args)]
     assert plan == [("fourierf-vm", "pcpu-wd0", seed) for seed in pmid.SEEDS[1:]]
     args.methods = None  # tensorf-vm has no sweep row: one clear error
     with pytest.raises(SystemExit, match="no sweep result for lego pcpu tensorf-vm"):
         pmid.seeds_plan(args)
+
+
+def test_seeds_of_named_settings_skip_what_tensorf_cannot_vary(pmid: ModuleType, tmp_path: Path) -> None:
+    results = tmp_path / "results.jsonl"
+    results.write_text("")
+    args = argparse.Namespace(protocol=["pcpu"], scene=["lego"], results=results, methods=None, only=["wd0-ramp0.5"])
+    plan = [(r.method, r.views, r.seed) for _, r in pmid.seeds_plan(args)]
+    assert plan == [("fourierf-vm", "pcpu-wd0-ramp0.5", seed) for seed in pmid.SEEDS[1:]]

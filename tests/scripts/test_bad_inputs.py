@@ -294,6 +294,14 @@ CASES: dict[str, Case] = {
         train_with(f"{MODEL}.fourier.f0-density", "0.6", f"{MODEL}.fourier.f-final", "0.5"),
         ("f0-density 0.6 is above", "f-final 0.5", "cutoff only grows"),
     ),
+    "train: colour f0 above the colour's final cutoff": Case(
+        "train",
+        train_with(f"{MODEL}.fourier.f0-color", "0.6", f"{MODEL}.fourier.f-final-color", "0.5"),
+        ("f0-color 0.6 is above", "f-final-color 0.5", "cutoff only grows"),
+    ),
+    "train: colour final cutoff above 1": Case(
+        "train", train_with(f"{MODEL}.fourier.f-final-color", "2"), ("f-final-color 2", "(0, 1]")
+    ),
     "train: final cutoff 0": Case("train", train_with(f"{MODEL}.fourier.f-final", "0"), ("f-final 0", "(0, 1]")),
     "train: negative ramp": Case("train", train_with(f"{MODEL}.fourier.ramp-fraction", "-1"), ("ramp-fraction -1",)),
     "train: negative plane leakage": Case(

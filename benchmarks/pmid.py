@@ -2,8 +2,9 @@
 
 Why two budgets: the paper's claim is that the curriculum pays where TensoRF overfits (bigger grids, more iterations,
 finer images). P-CPU is the budget a user runs on a CPU by default; P-MID is the largest that still trains in about
-20 minutes on a 2-core CPU (the cost estimate of ``engine.estimates``: 3000 × 2048 rays × 192 × 1.05e-6 s ≈ 21 min),
-so the gain-versus-scale trend can be read off one table.
+20 minutes on a 2-core CPU (the cost estimate of ``engine.estimates``: 3000 × 2048 rays × 192 × 1.05e-6 s ≈ 21 min;
+lego took 24-30 min a run, two at a time with one thread each), so the gain-versus-scale trend can be read off one
+table.
 
 | protocol | iterations | rays | grid | lego (4 views 27 76 97 99) | fern (3 views 1 10 19) |
 |---|---|---|---|---|---|

@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shlex
 import shutil
 import statistics
 import subprocess
@@ -228,7 +229,7 @@ def main() -> None:
     meta = {
         "old": args.old, "new": args.new or "working tree", "describe": args.describe, "pairs": args.pairs,
         "seeds": [args.seeds[i % len(args.seeds)] for i in range(args.pairs)],
-        "command": "python benchmarks/ab_speed.py " + " ".join(sys.argv[1:]),
+        "command": "python benchmarks/ab_speed.py " + shlex.join(sys.argv[1:]),
     }  # fmt: skip
     (args.work / "meta.json").write_text(json.dumps(meta))
     print("\n".join(write_report(args.work, args.markdown)))

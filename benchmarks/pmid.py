@@ -3,7 +3,7 @@
 Why two budgets: the paper's claim is that the curriculum pays where TensoRF overfits (bigger grids, more iterations,
 finer images). P-CPU is the budget a user runs on a CPU by default; P-MID is the largest that still trains in about
 20 minutes on a 2-core CPU (the cost estimate of ``engine.estimates``: 3000 × 2048 rays × 192 × 1.05e-6 s ≈ 21 min;
-lego took 24-30 min a run, two at a time with one thread each), so the gain-versus-scale trend can be read off one
+lego took 24-45 min a run, two at a time with one thread each), so the gain-versus-scale trend can be read off one
 table.
 
 | protocol | iterations | rays | grid | lego (4 views 27 76 97 99) | fern (3 views 1 10 19) |
@@ -115,8 +115,16 @@ F_FINAL = "--pipeline.model.fourier.f-final"
 F_FINAL_COLOR = "--pipeline.model.fourier.f-final-color"
 F0_DENSITY, F0_COLOR = "--pipeline.model.fourier.f0-density", "--pipeline.model.fourier.f0-color"
 FNM = ["--pipeline.model.floaters-gradient-scaling", "True"]
+IN_BAND = ["--pipeline.model.fourier.init-in-band", "True"]
 RULE_LEGO = [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.04"]
-TV_LOW = ["--pipeline.model.tv-weight-density", "0.1", "--pipeline.model.tv-weight-appearance", "0.1"]
+
+
+def tv_weights(weight: float) -> list[str]:
+    """Both TV weights (density and appearance planes) at ``weight``."""
+    return ["--pipeline.model.tv-weight-density", str(weight), "--pipeline.model.tv-weight-appearance", str(weight)]
+
+
+TV_LOW = tv_weights(0.1)
 SETTINGS: dict[str, dict[str, list[str]]] = {
     # Object scenes: the synthetic preset and the levers the issue names (weight decay, lr decay, TV, f0/Δ).
     "lego": {
@@ -157,6 +165,19 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # The geometry alone band-limited for good (appearance opens fully): a quarter of the filtering's cost.
         "wd0-nodecay-lr0.04-ramp0.5-ffinald0.7": [*RULE_LEGO, RAMP, "0.5", F_FINAL, "0.7", F_FINAL_COLOR, "1.0"],
         "wd0-nodecay-lr0.04-ramp0.5-ffinald0.5": [*RULE_LEGO, RAMP, "0.5", F_FINAL, "0.5", F_FINAL_COLOR, "1.0"],
+        # TV weight around the preset's 1.0 (0.1 lost 2 dB), for both methods at the rule's grid lr.
+        "wd0-nodecay-lr0.04-tv2": [*RULE_LEGO, *tv_weights(2.0)],
+        "wd0-nodecay-lr0.04-ramp0.5-tv2": [*RULE_LEGO, RAMP, "0.5", *tv_weights(2.0)],
+        "wd0-nodecay-lr0.04-tv0.5": [*RULE_LEGO, *tv_weights(0.5)],
+        "wd0-nodecay-lr0.04-ramp0.5-tv0.5": [*RULE_LEGO, RAMP, "0.5", *tv_weights(0.5)],
+        "wd0-nodecay-lr0.04-tv3": [*RULE_LEGO, *tv_weights(3.0)],
+        "wd0-nodecay-lr0.04-tv4": [*RULE_LEGO, *tv_weights(4.0)],
+        "wd0-nodecay-lr0.04-tv6": [*RULE_LEGO, *tv_weights(6.0)],
+        "wd0-nodecay-lr0.04-tv8": [*RULE_LEGO, *tv_weights(8.0)],
+        # The raw factors start inside the f0 band (no initial noise waiting outside it).
+        "wd0-nodecay-lr0.04-inband": [*RULE_LEGO, *IN_BAND],
+        "wd0-nodecay-lr0.04-ramp0.5-inband": [*RULE_LEGO, RAMP, "0.5", *IN_BAND],
+        "wd0-nodecay-lr0.04-tv2-inband": [*RULE_LEGO, *tv_weights(2.0), *IN_BAND],
     },
     # Forward-facing scenes: the real-scene preset (the trainer applies it), its grid lr, the occlusion term, f0/Δ,
     # Floaters-No-More gradient scaling.
@@ -178,9 +199,12 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-tvconst-fnm-ramp0.25": ["--optimizer.lr-grids", "0.08", *TV_CONST, *FNM, RAMP, "0.25"],
         # Session 14: at 3000 iterations the band opens only at the end; a quarter of the run opens it by step 750.
         "lr0.08-tvconst-ramp0.25": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.25"],
+        # Session 16: TV 4 won on lego for both methods; does a stronger TV term carry to a forward-facing scene?
+        "lr0.08-tvconst-tv2": ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(2.0)],
+        "lr0.08-tvconst-tv4": ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(4.0)],
     },
 }  # fmt: skip
-CURRICULUM_ONLY = ("ramp", "f0", "ffinal")
+CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband")
 """Settings that only change the curriculum: tensorf-vm (masks off) would repeat its run, so it skips them."""
 
 

@@ -132,6 +132,17 @@ class FourierTensoRFField(PreparedField):
         for grid, factors in ((self.density_grid, g.density), (self.appearance_grid, g.appearance)):
             grid.replace(*grid.upsampled(factors.planes, factors.lines, list(reso)))
 
+    def keep_band(self, f_density: float, f_color: float) -> None:
+        """Replace each raw factor by its low-pass at these cutoffs: what lies outside the band starts at 0.
+
+        Why: the filter hides the initial noise outside the band from the gradient, so it stays in the raw factors and
+        shows up as the band opens, multiplied by partners that have meanwhile been trained (spec 4.4)."""
+        with torch.no_grad():
+            g = self.filter(f_density, f_color)
+        for grid, factors in ((self.density_grid, g.density), (self.appearance_grid, g.appearance)):
+            grid.replace(factors.planes, factors.lines)
+        self.invalidate()
+
     def param_groups(self) -> dict[str, list[nn.Parameter]]:
         grids = list(self.density_grid.parameters()) + list(self.appearance_grid.parameters())
         return {"grids": grids, "networks": list(self.basis.parameters()) + list(self.decoder.parameters())}

@@ -69,6 +69,9 @@ class FourierConfig:
     f_final_color: float | None = None
     """Final cutoff of the appearance grids; None: ``f_final``. With ``f_final`` < 1 and this 1, only the geometry
     stays band-limited, and the field filters a quarter of the channels once the ramp is over (16 of 64 per plane)."""
+    init_in_band: bool = False
+    """Start the raw factors low-passed at f0, so no initial noise waits outside the band (the paper and the official
+    code keep it: it shows up as the band opens, multiplied by partners trained in the meantime)."""
     plane_leakage: float = 0.0
     """Weight kept on out-of-band plane coefficients; the paper zeroes them, the official code keeps 1e-6."""
     app_planes_follow_density: bool = False
@@ -133,6 +136,8 @@ class FourieRFModel(nn.Module):
         self.voxel_targets = schedules.voxel_counts(fc.n_voxels_init, fc.n_voxels_final, len(self.upsample_steps))
         self.occupancy_steps = schedules.steps_from_fractions(config.occupancy_update_fractions, max_iters)
         self.field = self._build_field(scene_box, effects, generator, device)
+        if config.fourier.enabled and config.fourier.init_in_band and isinstance(self.field, FourierTensoRFField):
+            self.field.keep_band(*self.cutoffs(0))
         self.occupancy = OccupancyGrid()
 
     def _build_field(

@@ -9,7 +9,7 @@ import pytest
 
 from fourierf_plugin.method_configs import all_methods, finalize
 from fourierf_plugin.method_configs.budget import (
-    OBJECT_RAMP_ITERATIONS,
+    OBJECT_TV_WEIGHT,
     PAPER_ITERATIONS,
     REAL_RAMP_ITERATIONS,
     SHORT_RUN_SETTINGS,
@@ -32,8 +32,11 @@ def finished(method: str, data: Path, *flags: str):
 
 
 def test_rule_is_a_function_of_the_iteration_count() -> None:
+    tv = OBJECT_TV_WEIGHT
     short = {"optimizer.weight_decay": 0.0, "optimizer.lr_decay_ratio": 1.0, "optimizer.lr_grids": 0.04}
+    short |= {"pipeline.model.tv_weight_density": tv, "pipeline.model.tv_weight_appearance": tv}
     assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS - 1) == short
+    assert short_run_settings("tensorf-vm", "synthetic", 800) == short, "objects: the same rule, masks off"
     assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS) == {}
     assert short_run_settings("fourierf-vm", "real", 800) == {
         "optimizer.lr_grids": 0.08,
@@ -44,15 +47,14 @@ def test_rule_is_a_function_of_the_iteration_count() -> None:
     assert short_run_settings("fourierf-vm", "real", 3000)[ramp] == 0.2667, "the band opens by step 800"
     assert round(0.2667 * 3000) == REAL_RAMP_ITERATIONS
     assert ramp not in short_run_settings("tensorf-vm", "real", 3000), "no band to open"
-    # objects: the band opens over the first 400 iterations where 20 % of the run is fewer, never past the run's end
-    object_ramps = {n: short_run_settings("fourierf-vm", "synthetic", n).get(ramp) for n in (300, 800, 1999, 2000)}
-    assert object_ramps == {300: 1.0, 800: 0.5, 1999: 0.2001, 2000: None}
-    assert round(0.5 * 800) == OBJECT_RAMP_ITERATIONS
-    assert ramp not in short_run_settings("tensorf-vm", "synthetic", 800)
+    # objects keep the paper's 20 % at any budget
+    assert all(ramp not in short_run_settings("fourierf-vm", "synthetic", n) for n in (300, 800, 3000))
     assert short_run_settings("zerorf-vm", "real", 800) == {}
     # the table is not handed out for mutation
     short_run_settings("fourierf-vm", "real", 800)["optimizer.lr_grids"] = 1.0
+    short_run_settings("tensorf-vm", "synthetic", 800)["optimizer.lr_grids"] = 1.0
     assert SHORT_RUN_SETTINGS[("fourierf-vm", "real")]["optimizer.lr_grids"] == 0.08
+    assert SHORT_RUN_SETTINGS[("fourierf-vm", "synthetic")]["optimizer.lr_grids"] == 0.04
 
 
 def test_cpu_run_of_an_object_drops_weight_decay_and_says_so() -> None:
@@ -61,8 +63,9 @@ def test_cpu_run_of_an_object_drops_weight_decay_and_says_so() -> None:
     assert config.optimizer.weight_decay == 0.0 and config.optimizer.lr_decay_ratio == 1.0
     assert config.pipeline.model.tv_decay_ratio == 1.0, "no lr decay: no TV decay either"
     assert config.optimizer.lr_grids == 0.04
-    ramp = config.pipeline.model.fourier.ramp_fraction
-    assert round(ramp * config.max_num_iterations) == OBJECT_RAMP_ITERATIONS or ramp == 1.0
+    model = config.pipeline.model
+    assert model.tv_weight_density == model.tv_weight_appearance == OBJECT_TV_WEIGHT
+    assert model.fourier.ramp_fraction == all_methods["fourierf-vm"].pipeline.model.fourier.ramp_fraction, "the paper's"
     assert any(n.startswith("budget rule") and "weight_decay=0.0" in n for n in notes)
 
 

@@ -23,6 +23,7 @@ from fourierf_plugin.data.parsers.llff import LLFF_DECLARATION, LLFFDataParserCo
 from fourierf_plugin.data.scene_effects import EffectsConfig, SceneEffects
 from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.method_configs import all_methods, config_registry, finalize, resume_config
+from fourierf_plugin.method_configs.budget import OBJECT_TV_WEIGHT
 from fourierf_plugin.method_configs.finalize import ignored_on_resume
 from fourierf_plugin.method_configs.scene_presets import (
     REAL_SCENE_SETTINGS,
@@ -64,7 +65,8 @@ def without_decisions(config: TrainerConfig) -> dict:
     data["pipeline"]["datamanager"].pop("rays_per_batch")
     data["pipeline"]["model"]["field"].pop("n_voxels_init")
     data["pipeline"]["model"]["field"].pop("n_voxels_final")
-    data["pipeline"]["model"].pop("tv_decay_ratio")
+    for tv in ("tv_decay_ratio", "tv_weight_density", "tv_weight_appearance"):
+        data["pipeline"]["model"].pop(tv)
     data["pipeline"]["model"]["fourier"].pop("ramp_fraction")
     data["optimizer"].pop("weight_decay")
     data["optimizer"].pop("lr_grids")
@@ -91,7 +93,8 @@ def test_blender_scene_keeps_the_synthetic_preset_and_gets_its_declared_effects(
     assert config.pipeline.effects == EffectsConfig.of(BLENDER_DECLARATION)
     assert notes[0].startswith("run size for 4 view(s) of 100x100 on cpu: ")
     assert notes[1].startswith(
-        "budget rule (800 < 10000 iterations): weight_decay=0.0, lr_decay_ratio=1.0, lr_grids=0.04, ramp_fraction=0.5"
+        "budget rule (800 < 10000 iterations): weight_decay=0.0, lr_decay_ratio=1.0, lr_grids=0.04, "
+        f"tv_weight_density={OBJECT_TV_WEIGHT}, tv_weight_appearance={OBJECT_TV_WEIGHT};"
     )
     assert notes[2:] == [
         "scene effects: background=white, rays=euclidean, view-dependent=no, occlusion-regularisation=no "
@@ -174,7 +177,8 @@ def test_a_methods_own_effect_setting_wins_over_the_declaration() -> None:
     [
         ("fourierf-vm-paper", [], 0.1),  # TensoRF's lr decay, so TensoRF's TV decay
         ("fourierf-vm", [], 1.0),  # a short run's budget rule: no lr decay, so no TV decay
-        ("tensorf-vm", [], 0.1),
+        ("tensorf-vm", [], 1.0),  # objects: the same rule
+        ("tensorf-vm", ["--budget-rule", "False"], 0.1),  # TensoRF's
         ("fourierf-vm-code", [], 1.0),  # the official code decays nothing
         ("fourierf-vm", ["--optimizer.lr-decay-ratio", "0.3"], 0.3),
         ("fourierf-vm", ["--pipeline.model.tv-decay-ratio", "0.5"], 0.5),  # the user's value wins

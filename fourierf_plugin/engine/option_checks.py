@@ -171,6 +171,17 @@ def check_final_cutoff(fourier: Any) -> None:
             )
 
 
+def check_init_in_band(fourier: Any) -> None:
+    """Starting inside the f0 band means nothing without a band: refuse it rather than ignore it."""
+    if fourier.init_in_band and not fourier.enabled:
+        flag = flag_of(f"{_MODEL}.fourier.init_in_band")
+        fail(
+            f"{flag} True needs the Fourier curriculum, which is off in this run (a tensorf-* preset or "
+            f"{flag_of(f'{_MODEL}.fourier.enabled')} False): there is no band to start in",
+            f"drop {flag}, or train a fourierf-* preset",
+        )
+
+
 EVENT_SCHEDULES = (f"{_MODEL}.field.upsample_fractions", f"{_MODEL}.occupancy_update_fractions")
 """Events placed at fractions of the run: each must land on a step inside it."""
 
@@ -184,6 +195,7 @@ def check_training_options(config: Any) -> None:
             fail(f"{flag} {_show(value)} is out of range: it must be {rule.needs}", f"pass e.g. {flag} {rule.example}")
     check_zerorf_options(config)
     check_final_cutoff(config.pipeline.model.fourier)
+    check_init_in_band(config.pipeline.model.fourier)
     iters = config.max_num_iterations
     if not (_integer(iters) and iters >= 1):
         fail(f"--max-num-iterations must be at least 1, got {iters}", "pass a positive number")

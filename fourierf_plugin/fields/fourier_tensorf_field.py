@@ -128,8 +128,7 @@ class FourierTensoRFField(PreparedField):
 
     def upsample(self, reso: Sequence[int]) -> None:
         """Replace each raw factor by the bilinear upsample of its *filtered* version (out-of-band is dropped)."""
-        g = self.filtered
-        for grid, factors in ((self.density_grid, g.density), (self.appearance_grid, g.appearance)):
+        for grid, factors in self._grids_with(self.filtered):
             grid.replace(*grid.upsampled(factors.planes, factors.lines, list(reso)))
 
     def keep_band(self, f_density: float, f_color: float) -> None:
@@ -138,10 +137,14 @@ class FourierTensoRFField(PreparedField):
         Why: the filter hides the initial noise outside the band from the gradient, so it stays in the raw factors and
         shows up as the band opens, multiplied by partners that have meanwhile been trained (spec 4.4)."""
         with torch.no_grad():
-            g = self.filter(f_density, f_color)
-        for grid, factors in ((self.density_grid, g.density), (self.appearance_grid, g.appearance)):
+            filtered = self.filter(f_density, f_color)
+        for grid, factors in self._grids_with(filtered):
             grid.replace(factors.planes, factors.lines)
         self.invalidate()
+
+    def _grids_with(self, filtered: FilteredGrids) -> tuple[tuple[TensorGrid, FilteredFactors], ...]:
+        """Each raw grid beside its filtered factors (density, then appearance)."""
+        return ((self.density_grid, filtered.density), (self.appearance_grid, filtered.appearance))
 
     def param_groups(self) -> dict[str, list[nn.Parameter]]:
         grids = list(self.density_grid.parameters()) + list(self.appearance_grid.parameters())

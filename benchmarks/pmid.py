@@ -202,6 +202,9 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # Session 16: TV 4 won on lego for both methods; does a stronger TV term carry to a forward-facing scene?
         "lr0.08-tvconst-tv2": ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(2.0)],
         "lr0.08-tvconst-tv4": ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(4.0)],
+        # Session 17: the forward-facing rule at 3000 iterations (band open by step 800: 800 / 3000).
+        "lr0.08-tvconst-ramp0.2667": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667"],
+        "lr0.08-tvconst-ramp0.2667-tv4": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667", *tv_weights(4.0)],
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband")

@@ -12,6 +12,7 @@ from fourierf_plugin.method_configs.budget import (
     OBJECT_TV_WEIGHT,
     PAPER_ITERATIONS,
     REAL_RAMP_ITERATIONS,
+    REAL_TV_WEIGHT,
     SHORT_RUN_SETTINGS,
     short_run_settings,
 )
@@ -38,11 +39,10 @@ def test_rule_is_a_function_of_the_iteration_count() -> None:
     assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS - 1) == short
     assert short_run_settings("tensorf-vm", "synthetic", 800) == short, "objects: the same rule, masks off"
     assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS) == {}
-    assert short_run_settings("fourierf-vm", "real", 800) == {
-        "optimizer.lr_grids": 0.08,
-        "pipeline.model.tv_decay_ratio": 1.0,
-    }
-    assert short_run_settings("tensorf-vm", "real", 800) == {"optimizer.lr_grids": 0.08}
+    real = {"optimizer.lr_grids": 0.08, "pipeline.model.tv_decay_ratio": 1.0}
+    real |= {"pipeline.model.tv_weight_density": REAL_TV_WEIGHT, "pipeline.model.tv_weight_appearance": REAL_TV_WEIGHT}
+    assert short_run_settings("fourierf-vm", "real", 800) == real
+    assert short_run_settings("tensorf-vm", "real", 800) == real, "forward-facing: the same rule, masks off"
     ramp = "pipeline.model.fourier.ramp_fraction"
     assert short_run_settings("fourierf-vm", "real", 3000)[ramp] == 0.2667, "the band opens by step 800"
     assert round(0.2667 * 3000) == REAL_RAMP_ITERATIONS
@@ -96,13 +96,15 @@ def test_paper_preset_keeps_the_papers_values_at_any_budget() -> None:
 
 
 @pytest.mark.parametrize("method", ["fourierf-vm", "tensorf-vm"])
-def test_forward_facing_short_run_gets_the_faster_grid_rate(llff_scene: Path, method: str) -> None:
+def test_forward_facing_short_run_gets_the_faster_grid_rate_and_constant_tv(llff_scene: Path, method: str) -> None:
     config, _ = finished(method, llff_scene)
     assert config.scene_preset == "real"
     assert config.optimizer.lr_grids == 0.08
-    assert config.pipeline.model.tv_decay_ratio == (1.0 if method == "fourierf-vm" else 0.1)
+    model = config.pipeline.model
+    assert model.tv_decay_ratio == 1.0 and model.tv_weight_density == model.tv_weight_appearance == REAL_TV_WEIGHT
     long_run, _ = finished(method, llff_scene, "--max-num-iterations", str(PAPER_ITERATIONS + 2000))
     assert long_run.optimizer.lr_grids == 0.02
+    assert long_run.pipeline.model.tv_weight_density == long_run.pipeline.model.tv_weight_appearance == 1.0
 
 
 def test_a_longer_forward_facing_run_opens_the_band_by_step_800(llff_scene: Path) -> None:

@@ -6,11 +6,10 @@ and by TensoRF alike, without the paper's weight decay 0.2 and without TensoRF's
 optimiser), at a grid lr 0.04 and with TV 4 on the planes (``OBJECT_TV_WEIGHT``; lego val, the preset's -> the
 rule's: FourieRF 21.30 -> 22.57 at 800 iterations, 20.34 -> 22.48 at 3000; TensoRF 21.41 -> 22.62, 20.50 -> 21.74).
 A forward-facing scene wants a 4x grid learning rate (TensoRF's 0.02 is tuned for 25k iterations: fern val 18.91 ->
-19.33 at 800, 18.27 -> 19.97 at 3000; tensorf-vm likewise), a constant TV weight of 4 on the planes
-(``REAL_TV_WEIGHT``), for both methods, and for FourieRF, in a longer run, its band open by step 800
-(``REAL_RAMP_ITERATIONS``). At the paper's budget and above the
-paper's values stand, as the paper measured them. ``--budget-rule False`` (or the ``fourierf-vm-paper`` preset) keeps
-the preset's values at any budget.
+19.33 at 800, 18.27 -> 19.97 at 3000; tensorf-vm likewise) and a constant TV weight of 4 on the planes
+(``REAL_TV_WEIGHT``), both methods alike, and FourieRF, in a longer run, its band open by step 800
+(``REAL_RAMP_ITERATIONS``). At the paper's budget and above the paper's values stand, as the paper measured them.
+``--budget-rule False`` (or the ``fourierf-vm-paper`` preset) keeps the preset's values at any budget.
 """
 
 from __future__ import annotations
@@ -32,10 +31,10 @@ seed: fourierf-vm TV 1 21.97, 2 22.44, 4 22.48, 6 22.05; tensorf-vm TV 1 20.38, 
 REAL_TV_WEIGHT = 4.0
 """Forward-facing scenes, both methods: a constant TV weight on the density and appearance planes (the paper's 1.0,
 TensoRF's decaying to 0.1). Fern val at grid lr 0.08, 800 iterations, mean of 3 seeds: fourierf-vm constant TV 1
-19.85, 4 20.05 (one seed: 2 19.88); tensorf-vm constant TV 1 18.20, 4 19.02 (one seed: 2 18.75). 3000 iterations
-(P-MID), one seed: fourierf-vm (band open by step 800) decaying TV 1 21.06, constant TV 4 21.36; tensorf-vm decaying
-TV 1 18.83, constant TV 4 20.84. The stronger TV lifts TensoRF more than FourieRF: it shrinks the P-MID fern test gap
-from +2.39 to +0.74 dB (BENCHMARKS.md)."""
+19.85, 4 20.05 (one seed: TV 2 19.88); tensorf-vm constant TV 1 18.20, 4 19.02 (one seed: TV 2 18.75). 3000
+iterations (P-MID), one seed: fourierf-vm decaying TV 1 with the band open by step 750 21.06, constant TV 4 21.36;
+tensorf-vm decaying TV 1 18.83, constant TV 4 20.84. The stronger TV lifts TensoRF more than FourieRF: it shrinks the
+P-MID fern test gap from +2.39 to +0.74 dB (BENCHMARKS.md)."""
 
 
 def _tv(weight: float) -> dict[str, Any]:

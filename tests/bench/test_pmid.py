@@ -93,9 +93,12 @@ def test_a_curve_trains_the_800_iteration_choice_unless_told(pmid: ModuleType, t
     tensorf = _row("wd0-nodecay", pmid.SEEDS[0], val=21.5, test=21.0) | {"method": "tensorf-vm"}
     tensorf["key"] = "lego/tensorf-vm_pcpu-wd0-nodecay_800_s20211202"
     results.write_text("".join(pmid.json.dumps(r) + "\n" for r in [*rows, tensorf]))
-    args = argparse.Namespace(protocol=["pcpu3000"], scene=["lego"], only=None, results=results)
+    args = argparse.Namespace(protocol=["pcpu3000"], scene=["lego"], only=None, results=results, methods=None)
     plan = {(r.method, r.views, r.iters) for _, r in pmid.curve_plan(args)}
     assert plan == {("fourierf-vm", "pcpu3000-wd0", 3000), ("tensorf-vm", "pcpu3000-wd0-nodecay", 3000)}
+    args.methods = ["tensorf-vm"]
+    assert {(r.method, r.views) for _, r in pmid.curve_plan(args)} == {("tensorf-vm", "pcpu3000-wd0-nodecay")}
+    args.methods = None
     args.only = ["wd0-ramp0.5", "preset"]
     plan = {(r.method, r.views) for _, r in pmid.curve_plan(args)}
     assert plan == {("fourierf-vm", "pcpu3000-wd0-ramp0.5"), ("fourierf-vm", "pcpu3000-preset"),
@@ -119,6 +122,19 @@ def test_the_curve_table_sets_each_step_beside_the_short_run(pmid: ModuleType) -
     assert pmid.curve_table({short["key"]: short}) == []
 
 
+def test_the_curve_table_sets_the_rules_3000_iteration_setting_beside_its_800(pmid: ModuleType) -> None:
+    (p_short, short), (p_long, long) = pmid.RULE_ALONG_THE_BUDGET["fourierf-vm"]
+    fern = {"scene": "fern", "method": "fourierf-vm"}
+    rows = [
+        _row(short, pmid.SEEDS[0], val=19.5, test=19.0) | fern | {"protocol": p_short, "key": "short"},
+        _row(long, pmid.SEEDS[0], val=21.0, test=20.5) | fern | {
+            "protocol": p_long, "key": "long", "curve": [[3000, 21.0, 20.5]],
+        },
+    ]  # fmt: skip
+    row = next(line for line in pmid.curve_table({r["key"]: r for r in rows}) if line.startswith("| fern"))
+    assert f"| 19.50 / 19.00 (`{short}`) |" in row, "the rule's 800-iteration run stands beside its 3000"
+
+
 def test_the_equal_time_line_compares_more_iterations_with_the_final_cutoff(pmid: ModuleType) -> None:
     longer = _row("wd0-nodecay", pmid.SEEDS[0], val=22.0, test=21.5) | {"protocol": "pcpu1040", "key": "a"}
     capped = [_row("wd0-nodecay-ffinal0.7", seed, val=22.25, test=22.0) | {"key": f"b{seed}"} for seed in (1, 2)]
@@ -130,19 +146,21 @@ def test_the_equal_time_line_compares_more_iterations_with_the_final_cutoff(pmid
     assert pmid.equal_time_lines({"a": longer}) == []
 
 
-def test_the_rule_line_sets_the_rules_800_iteration_run_beside_its_3000(pmid: ModuleType) -> None:
-    (p_short, short), (p_long, long) = pmid.RULE_ALONG_THE_BUDGET
-    rows = [
-        _row(short, pmid.SEEDS[0], val=19.5, test=19.0) | {"scene": "fern", "protocol": p_short},
-        _row(long, pmid.SEEDS[0], val=21.0, test=20.5) | {"scene": "fern", "protocol": p_long, "key": "fern/long"},
-    ]
-    rows[0]["key"] = "fern/short"
-    line = pmid.rule_along_the_budget({r["key"]: r for r in rows})
-    assert line == [
-        f"- fern, fourierf-vm, the budget rule's settings at P-CPU sizes: `{short}` at 800 iterations val 19.50, "
+def test_the_rule_line_sets_each_methods_800_iteration_run_beside_its_3000(pmid: ModuleType) -> None:
+    rows = []
+    for method, ((p_short, short), (p_long, long)) in pmid.RULE_ALONG_THE_BUDGET.items():
+        base = {"scene": "fern", "method": method}
+        rows += [
+            _row(short, pmid.SEEDS[0], val=19.5, test=19.0) | base | {"protocol": p_short, "key": f"{method}/short"},
+            _row(long, pmid.SEEDS[0], val=21.0, test=20.5) | base | {"protocol": p_long, "key": f"{method}/long"},
+        ]
+    lines = pmid.rule_along_the_budget({r["key"]: r for r in rows})
+    assert lines == [
+        f"- fern, {method}, the budget rule's settings at P-CPU sizes: `{short}` at 800 iterations val 19.50, "
         f"test 19.00 → `{long}` at 3000 val 21.00, test 20.50"
+        for method, ((_, short), (_, long)) in pmid.RULE_ALONG_THE_BUDGET.items()
     ]
-    assert pmid.rule_along_the_budget({"fern/short": rows[0]}) == [], "no 3000-iteration run: no line"
+    assert pmid.rule_along_the_budget({r["key"]: r for r in rows[:1]}) == [], "no 3000-iteration run: no line"
 
 
 def test_seeds_run_the_val_choice_on_the_later_seeds(pmid: ModuleType, tmp_path: Path) -> None:

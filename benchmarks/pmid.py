@@ -87,6 +87,16 @@ GRIDS = (
         "training view. The occlusion term at FreeNeRF's strength is what keeps tensorf-vm's near patches in check at "
         "all (val 15.92 dB without it, 18.39 with it).",
     ),
+    Grid(
+        "docs/fern_grid_pmid.png",
+        "P-MID runs under the current rule, fourierf-vm `lr0.08-tvconst-ramp0.2667-tv4` and tensorf-vm "
+        "`lr0.08-tvconst-tv4`, both at constant TV 4",
+        ("fourierf-vm", "tensorf-vm"),
+        "both are opaque everywhere and far less ghosted than at P-CPU with TV 1. tensorf-vm still holds near-camera "
+        "density: a dark (near) patch over the ceiling at the top left and dark streaks along several fronds and the "
+        "left edge. fourierf-vm's depth is smoother, the plant in front of the planter and the wall behind, with one "
+        "near blob at the foot of the planter and a thin streak near the top; its RGB is softer (the band limit).",
+    ),
 )
 
 SEEDS = (20211202, 1, 2)

@@ -35,8 +35,8 @@ TensoRF's decaying to 0.1). Fern val at grid lr 0.08, 800 iterations, mean of 3 
 iterations (P-MID), one seed: fourierf-vm constant TV 1 21.18 (decaying, band open by step 750: 21.06), TV 4 21.36;
 tensorf-vm decaying TV 1 18.83, constant TV 4 20.84. At 3000 iterations on P-CPU's 128³ grid, one seed, it lost
 instead (constant TV 1 -> 4: fourierf-vm 21.22 -> 20.94, tensorf-vm 21.15 -> 20.94), where TensoRF does not overfit.
-The stronger TV lifts TensoRF more than FourieRF: it shrinks the P-MID fern test gap from +2.39 to +0.74 dB
-(BENCHMARKS.md)."""
+The stronger TV lifts TensoRF more than FourieRF: it shrinks the P-MID fern test gap from +2.39 to +0.74 dB, and
+with Floaters-No-More on top tensorf-vm leads by 0.52 dB on test (BENCHMARKS.md)."""
 
 
 def _tv(weight: float) -> dict[str, Any]:

@@ -90,7 +90,8 @@ GRIDS = (
     Grid(
         "docs/fern_grid_pmid.png",
         "P-MID runs under the current rule, fourierf-vm `lr0.08-tvconst-ramp0.2667-tv4` and tensorf-vm "
-        "`lr0.08-tvconst-tv4`, both at constant TV 4",
+        "`lr0.08-tvconst-tv4`, both at constant TV 4 (tensorf-vm's val choice at P-MID adds Floaters-No-More: not "
+        "shown)",
         ("fourierf-vm", "tensorf-vm"),
         "both are opaque everywhere and far less ghosted than at P-CPU with TV 1. tensorf-vm still holds near-camera "
         "density: a dark (near) patch over the ceiling at the top left and dark streaks along several fronds and the "

@@ -23,6 +23,7 @@ val-chosen setting's test score is reported. Stages:
 
     python benchmarks/pmid.py sweep  --protocol pcpu pmid --scene lego fern   # every setting, first seed
     python benchmarks/pmid.py seeds  --protocol pcpu pmid --scene lego fern   # the val-chosen setting, more seeds
+    python benchmarks/pmid.py seeds  --protocol pmid --scene lego --seeds 1   # one later seed at a time (long runs)
     python benchmarks/pmid.py curve  --scene fern     # P-CPU sizes at 3000 iterations, a checkpoint every 500 evaluated
     python benchmarks/pmid.py report                                          # BENCHMARKS.md section
 
@@ -238,6 +239,10 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-tvconst-ramp0.2667-tv4": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667", *tv_weights(4.0)],
         # Session 18: Floaters-No-More (tensorf-vm's val choice at 800 iterations, TV 1) on top of TV 4.
         "lr0.08-tvconst-tv4-fnm": ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(4.0), *FNM],
+        # Session 19: the same for fourierf-vm at 3000 iterations, with the rule's ramp (band open by step 800).
+        "lr0.08-tvconst-ramp0.2667-tv4-fnm": [
+            "--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667", *tv_weights(4.0), *FNM,
+        ],
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband")
@@ -370,6 +375,7 @@ def sweep_plan(args: argparse.Namespace) -> list[tuple[str, Run]]:
 
 def seeds_plan(args: argparse.Namespace) -> list[tuple[str, Run]]:
     results = load_results(args.results)
+    seeds = getattr(args, "seeds", None) or SEEDS[1:]
     plan = []
     for p in args.protocol:
         for scene in args.scene:
@@ -382,7 +388,7 @@ def seeds_plan(args: argparse.Namespace) -> list[tuple[str, Run]]:
                         sys.exit(f"error: no sweep result for {scene} {p} {method}; run the sweep stage first")
                     settings = [best]
                 plan += [
-                    (scene, Run(method, PROTOCOLS[p].iters, seed, label(p, s))) for s in settings for seed in SEEDS[1:]
+                    (scene, Run(method, PROTOCOLS[p].iters, seed, label(p, s))) for s in settings for seed in seeds
                 ]
     return plan
 
@@ -566,6 +572,8 @@ def main() -> None:
     ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
     ap.add_argument("--only", nargs="+", default=None, help="sweep only these settings (names from SETTINGS)")
     ap.add_argument("--methods", nargs="+", choices=METHODS, default=None, help="run only these methods")
+    ap.add_argument("--seeds", nargs="+", type=int, choices=SEEDS[1:], default=None,
+                    help="the seeds stage runs only these of the later seeds (default: all)")  # fmt: skip
     ap.add_argument("--jobs", type=int, default=1, help="trainings at once")
     ap.add_argument("--threads", type=int, default=None, help="CPU threads per training")
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")

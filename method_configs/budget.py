@@ -26,7 +26,8 @@ OBJECT_TV_WEIGHT = 4.0
 """Object scenes, both methods: the TV weight on the density and appearance planes (the paper's 1.0). Chosen on
 lego's val views at the rest of the object rule. 800 iterations, mean of 3 seeds: fourierf-vm TV 2 22.56, 3 22.52,
 4 22.59 (TV 1 22.02, one seed); tensorf-vm TV 1 22.04, 4 22.69 (6 22.40, one seed). 3000 iterations (P-MID), one
-seed: fourierf-vm TV 1 21.97, 2 22.44, 4 22.48, 6 22.05; tensorf-vm TV 1 20.38, 4 21.74, 6 22.22, 8 22.07."""
+seed: fourierf-vm TV 1 21.97, 2 22.44, 4 22.48, 6 22.05; tensorf-vm TV 1 20.38, 4 21.74, 6 22.22, 8 22.07 (3 seeds:
+fourierf-vm TV 4 22.57, tensorf-vm TV 6 22.45)."""
 
 REAL_TV_WEIGHT = 4.0
 """Forward-facing scenes, both methods: a constant TV weight on the density and appearance planes (the paper's 1.0,
@@ -36,7 +37,8 @@ iterations (P-MID), one seed: fourierf-vm constant TV 1 21.18 (decaying, band op
 tensorf-vm decaying TV 1 18.83, constant TV 4 20.84. At 3000 iterations on P-CPU's 128³ grid, one seed, it lost
 instead (constant TV 1 -> 4: fourierf-vm 21.22 -> 20.94, tensorf-vm 21.15 -> 20.94), where TensoRF does not overfit.
 The stronger TV lifts TensoRF more than FourieRF: it shrinks the P-MID fern test gap from +2.39 to +0.74 dB, and
-with Floaters-No-More on top tensorf-vm leads by 0.52 dB on test (BENCHMARKS.md)."""
+with Floaters-No-More on top tensorf-vm leads by 0.52 dB on test (BENCHMARKS.md); on fourierf-vm it does nothing
+there (val 21.36 -> 21.33)."""
 
 
 def _tv(weight: float) -> dict[str, Any]:

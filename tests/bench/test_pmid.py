@@ -181,3 +181,5 @@ def test_seeds_of_named_settings_skip_what_tensorf_cannot_vary(pmid: ModuleType,
     args = argparse.Namespace(protocol=["pcpu"], scene=["lego"], results=results, methods=None, only=["wd0-ramp0.5"])
     plan = [(r.method, r.views, r.seed) for _, r in pmid.seeds_plan(args)]
     assert plan == [("fourierf-vm", "pcpu-wd0-ramp0.5", seed) for seed in pmid.SEEDS[1:]]
+    args.seeds = [pmid.SEEDS[2]]  # one of the later seeds, when a run is long
+    assert [r.seed for _, r in pmid.seeds_plan(args)] == [pmid.SEEDS[2]]

@@ -375,7 +375,7 @@ def sweep_plan(args: argparse.Namespace) -> list[tuple[str, Run]]:
 
 def seeds_plan(args: argparse.Namespace) -> list[tuple[str, Run]]:
     results = load_results(args.results)
-    seeds = getattr(args, "seeds", None) or SEEDS[1:]
+    seeds = args.seeds or SEEDS[1:]
     plan = []
     for p in args.protocol:
         for scene in args.scene:
@@ -580,6 +580,8 @@ def main() -> None:
     args = ap.parse_args()
     if args.protocol is None:
         args.protocol = ["pcpu3000"] if args.stage == "curve" else ["pcpu", "pmid", "pmid800"]
+    if args.seeds and args.stage != "seeds":
+        sys.exit(f"error: --seeds picks the later seeds of the seeds stage; drop it for the {args.stage} stage")
     known = {name for scene in args.scene for name in SETTINGS[scene]}
     unknown = sorted(set(args.only or ()) - known)
     if unknown:

@@ -1,5 +1,5 @@
 """benchmarks/pmid.py on made-up rows: settings are chosen on val alone, the plans skip what a method cannot vary,
-and an unknown ``--only`` name is one clear error."""
+and an unknown ``--only`` name or a misplaced ``--seeds`` is one clear error."""
 
 from __future__ import annotations
 
@@ -85,6 +85,16 @@ def test_an_unknown_setting_is_one_clear_error(tmp_path: Path) -> None:
     )
     assert done.returncode != 0 and "Traceback" not in done.stderr
     assert "--methods" in done.stderr and "invalid choice: 'nerf'" in done.stderr and "fourierf-vm" in done.stderr
+    done = subprocess.run(
+        [sys.executable, str(SCRIPT), "seeds", "--seeds", "7", "--work", str(tmp_path)], capture_output=True, text=True
+    )
+    assert done.returncode != 0 and "Traceback" not in done.stderr
+    assert "--seeds" in done.stderr and "invalid choice: 7" in done.stderr
+    done = subprocess.run(
+        [sys.executable, str(SCRIPT), "sweep", "--seeds", "1", "--work", str(tmp_path)], capture_output=True, text=True
+    )
+    assert done.returncode != 0 and "Traceback" not in done.stderr
+    assert "--seeds picks the later seeds of the seeds stage; drop it for the sweep stage" in done.stderr
 
 
 def test_a_curve_trains_the_800_iteration_choice_unless_told(pmid: ModuleType, tmp_path: Path) -> None:
@@ -167,7 +177,9 @@ def test_seeds_run_the_val_choice_on_the_later_seeds(pmid: ModuleType, tmp_path:
     results = tmp_path / "results.jsonl"
     rows = [_row("wd0", pmid.SEEDS[0], val=22.0, test=20.0), _row("preset", pmid.SEEDS[0], val=21.0, test=23.0)]
     results.write_text("".join(pmid.json.dumps(r) + "\n" for r in rows))
-    args = argparse.Namespace(protocol=["pcpu"], scene=["lego"], results=results, methods=["fourierf-vm"], only=None)
+    args = argparse.Namespace(
+        protocol=["pcpu"], scene=["lego"], results=results, methods=["fourierf-vm"], only=None, seeds=None
+    )
     plan = [(r.method, r.views, r.seed) for _, r in pmid.seeds_plan(args)]
     assert plan == [("fourierf-vm", "pcpu-wd0", seed) for seed in pmid.SEEDS[1:]]
     args.methods = None  # tensorf-vm has no sweep row: one clear error
@@ -178,7 +190,9 @@ def test_seeds_run_the_val_choice_on_the_later_seeds(pmid: ModuleType, tmp_path:
 def test_seeds_of_named_settings_skip_what_tensorf_cannot_vary(pmid: ModuleType, tmp_path: Path) -> None:
     results = tmp_path / "results.jsonl"
     results.write_text("")
-    args = argparse.Namespace(protocol=["pcpu"], scene=["lego"], results=results, methods=None, only=["wd0-ramp0.5"])
+    args = argparse.Namespace(
+        protocol=["pcpu"], scene=["lego"], results=results, methods=None, only=["wd0-ramp0.5"], seeds=None
+    )
     plan = [(r.method, r.views, r.seed) for _, r in pmid.seeds_plan(args)]
     assert plan == [("fourierf-vm", "pcpu-wd0-ramp0.5", seed) for seed in pmid.SEEDS[1:]]
     args.seeds = [pmid.SEEDS[2]]  # one of the later seeds, when a run is long

@@ -156,6 +156,11 @@ def tv_weights(weight: float) -> list[str]:
     return ["--pipeline.model.tv-weight-density", str(weight), "--pipeline.model.tv-weight-appearance", str(weight)]
 
 
+def depth_smoothness(weight: float) -> list[str]:
+    """RegNeRF's depth smoothness at ``weight`` on the default unseen-view patches (4 of 8×8 pixels a step)."""
+    return ["--pipeline.model.depth-smoothness-weight", str(weight)]
+
+
 TV_LOW = tv_weights(0.1)
 SETTINGS: dict[str, dict[str, list[str]]] = {
     # Object scenes: the synthetic preset and the levers the issue names (weight decay, lr decay, TV, f0/Δ).
@@ -210,6 +215,8 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "wd0-nodecay-lr0.04-inband": [*RULE_LEGO, *IN_BAND],
         "wd0-nodecay-lr0.04-ramp0.5-inband": [*RULE_LEGO, RAMP, "0.5", *IN_BAND],
         "wd0-nodecay-lr0.04-tv2-inband": [*RULE_LEGO, *tv_weights(2.0), *IN_BAND],
+        # Session 20: RegNeRF's depth smoothness on patches from poses between the four cameras, on the rule.
+        "wd0-nodecay-lr0.04-tv4-ds1": [*RULE_LEGO, *tv_weights(4.0), *depth_smoothness(1.0)],
     },
     # Forward-facing scenes: the real-scene preset (the trainer applies it), its grid lr, the occlusion term, f0/Δ,
     # Floaters-No-More gradient scaling.
@@ -243,6 +250,13 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-tvconst-ramp0.2667-tv4-fnm": [
             "--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667", *tv_weights(4.0), *FNM,
         ],
+        # Session 20: RegNeRF's depth smoothness on 8×8 patches from poses between the training cameras, on the rule.
+        **{
+            f"lr0.08-tvconst-tv4-ds{weight}": [
+                "--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(4.0), *depth_smoothness(weight),
+            ]
+            for weight in (0.1, 1, 10)
+        },
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband")

@@ -11,6 +11,7 @@ from torch import Tensor
 
 from fourierf_plugin.cameras.cameras import Cameras
 from fourierf_plugin.cameras.ndc import ndc_rays
+from fourierf_plugin.cameras.unseen_views import patch_rays, random_corners, random_poses
 from fourierf_plugin.configs.base import InstantiateConfig
 from fourierf_plugin.data.dataparser_base import DataparserOutputs, Split
 from fourierf_plugin.data.parsers import DataParserUnion, default_dataparser
@@ -126,6 +127,18 @@ class DataManager:
         self._cursor += size
         r = self.train_rays
         return RayBatch(r.origins[idx], r.directions[idx], r.rgba[idx])
+
+    def unseen_patches(self, count: int, size: int, generator: torch.Generator) -> tuple[Tensor, Tensor]:
+        """Origins and directions [count * size², 3] (in the scene's ray space, on the device) of ``count`` random
+        ``size × size`` pixel patches seen from random poses between the training cameras (RegNeRF's unseen views),
+        drawn from ``generator``."""
+        cameras = self.reference_outputs.cameras
+        poses = random_poses(cameras.camera_to_worlds.to(generator.device), count, generator)
+        corners = random_corners(cameras, count, size, generator)
+        o, d = patch_rays(cameras, poses, corners, size, normalize=self.ray_space != "ndc")
+        if self.ray_space == "ndc":
+            o, d = ndc_rays(o, d, float(cameras.fx[0]), cameras.width, cameras.height, near=1.0)
+        return o.to(self.device), d.to(self.device)
 
     def eval_views(self, split: Split) -> Iterator[EvalView]:
         outputs = self.parser.get_outputs(split)

@@ -63,3 +63,11 @@ def density_l1(planes: Sequence[Tensor], lines: Sequence[Tensor]) -> Tensor:
     """TensoRF's density sparsity term ``Σ_i mean|P_i| + mean|L_i|``."""
     terms = [p.abs().mean() for p in planes] + [line.abs().mean() for line in lines]
     return torch.stack(terms).sum()
+
+
+def depth_smoothness(depth: Tensor) -> Tensor:
+    """RegNeRF's depth smoothness of patches [P, S, S]: the mean squared difference between vertical neighbours plus
+    that between horizontal ones (0 for a constant patch, and 0, not NaN, for no patches)."""
+    if depth.shape[0] == 0:
+        return depth.sum()
+    return depth.diff(dim=1).square().mean() + depth.diff(dim=2).square().mean()

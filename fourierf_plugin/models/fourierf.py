@@ -218,17 +218,24 @@ class FourieRFModel(nn.Module):
         with phase("fourier_filter"):
             self.field.prepare(*self.cutoffs(step))
 
-    def forward(self, origins: Tensor, directions: Tensor, background: Tensor | None = None) -> dict:
+    def forward(
+        self,
+        origins: Tensor,
+        directions: Tensor,
+        background: Tensor | None = None,
+        jitter: torch.Generator | None = None,
+    ) -> dict:
         """Render rays [R, 3] (unit directions; NDC directions as made): rgb [R, 3], accumulation and depth [R].
 
-        In training mode samples are jittered and the regularisers' inputs are returned too; in eval mode colours
-        are clamped and, if the accel config says so, rays stop marching once they are opaque.
+        In training mode samples are jittered (from ``jitter``, default the step generator) and the regularisers'
+        inputs are returned too; in eval mode colours are clamped and, if the accel config says so, rays stop
+        marching once they are opaque.
         """
         if background is None:
             kind = self.effects.background if self.training else self.effects.eval_background
             background = background_color(kind, origins.shape[0], origins.device, self.generator, self.step_generator)
         with phase("sampling"):
-            samples = self.sample(origins, directions)
+            samples = self.sample(origins, directions, jitter)
         with phase("density"):
             sigma = self.march(samples)
         scale = floaters_scale(samples.t) if self.training and self.config.floaters_gradient_scaling else None
@@ -251,9 +258,10 @@ class FourieRFModel(nn.Module):
             out["occlusion"] = occlusion_penalty(sigma, self.config.occlusion_fraction, self.config.distance_scale)
         return out
 
-    def sample(self, origins: Tensor, directions: Tensor) -> RaySamples:
-        """Fixed steps through the box (euclidean rays) or even steps along NDC rays; jittered in training."""
-        generator = self.step_generator if self.training else None
+    def sample(self, origins: Tensor, directions: Tensor, jitter: torch.Generator | None = None) -> RaySamples:
+        """Fixed steps through the box (euclidean rays) or even steps along NDC rays; jittered in training (from
+        ``jitter``, default the step generator)."""
+        generator = (jitter or self.step_generator) if self.training else None
         num = self.samples_per_ray(self.training)
         if self.effects.ray_space == "ndc":
             return ndc_samples(origins, directions, self.aabb, self.near, self.far, num, generator)
@@ -278,6 +286,16 @@ class FourieRFModel(nn.Module):
             accel.early_stop_transmittance,
             accel.early_stop_segment,
         )
+
+    def unseen_depth_smoothness(
+        self, origins: Tensor, directions: Tensor, size: int, jitter: torch.Generator | None = None
+    ) -> Tensor:
+        """RegNeRF's depth smoothness, weighted, on patches [P * size², 3] of rays from unseen poses: density that
+        paints each photo from just in front of its camera leaves the depth torn between the views. ``jitter``: where
+        the samples' jitter comes from (the pipeline keeps these draws off the training batches' stream)."""
+        background = torch.zeros(3, device=origins.device)  # colour is not scored here: draw no coin for it
+        depth = self.forward(origins, directions, background, jitter)["depth"]
+        return self.config.depth_smoothness_weight * losses.depth_smoothness(depth.view(-1, size, size))
 
     def loss_dict(self, outputs: dict, target_rgba: Tensor, step: int) -> dict[str, Tensor]:
         """Photometric MSE plus the regularisers, all on this iteration's filtered grids."""
@@ -454,6 +472,13 @@ class FourieRFModelConfig(InstantiateConfig):
     """Share of each ray, from its start, whose densities the occlusion term penalises (FreeNeRF: 20 of 128)."""
     floaters_gradient_scaling: bool = False
     """'Floaters No More': scale density and colour gradients by clamp(t², 0, 1) (t: the ray parameter)."""
+    depth_smoothness_weight: float = 0.0
+    """RegNeRF's depth smoothness on patches seen from poses between the training cameras (RegNeRF: 0.1 on NDC depth,
+    8×8 patches); 0 = off, and no extra rays are rendered."""
+    depth_smoothness_patches: int = 4
+    """Unseen-view patches per iteration (each costs size² extra rays)."""
+    depth_smoothness_patch_size: int = 8
+    """Side of an unseen-view patch in pixels."""
     cull_weight_threshold: float = 0.0
     """Training on a CPU: σ is read without gradients first, then with them only where the compositing weight exceeds
     this; other samples count as empty (ZeroRF's occlusion culling: 1e-4). 0 = off."""

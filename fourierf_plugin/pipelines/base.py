@@ -18,6 +18,7 @@ from fourierf_plugin.data.scene_effects import EffectsConfig
 from fourierf_plugin.model_components.rendering import background_color, composite_target
 from fourierf_plugin.models.fourierf import Changes, FourieRFModel, FourieRFModelConfig
 from fourierf_plugin.utils.console import get_console
+from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.utils.phases import phase
 
 
@@ -50,6 +51,13 @@ class Pipeline:
             device=device, generator=self.step_generator, ray_space=self.effects.ray_space, load_train=load_train
         )
         scene = self.datamanager.reference_outputs
+        check_patch_fits(config.model, scene.cameras.width, scene.cameras.height)
+        if config.model.depth_smoothness_weight > 0 and self.effects.background != "none":
+            get_console().print(
+                "[yellow]warning:[/yellow] depth smoothness on a scene with a background: rays that miss the object "
+                "read as the far plane, so the term tears its silhouettes (lego, 4 views: val 22.57 -> 12.03 dB); "
+                "it is meant for forward-facing photos"
+            )
         self.model: FourieRFModel = config.model.setup(
             scene_box=scene.scene_box.to(device),
             near=scene.near,
@@ -61,6 +69,11 @@ class Pipeline:
             step_generator=self.step_generator,
         ).to(device)
         self._generator = generator
+        # Unseen-view patches draw from a stream of their own: turning depth smoothness on changes the loss, not the
+        # training batches or their jitter.
+        self.unseen_generator = torch.Generator(device=self.step_generator.device).manual_seed(
+            generator.initial_seed() + 2
+        )
 
     def train_step(self, step: int) -> tuple[Tensor, dict[str, Tensor]]:
         """Loss for one batch at ``step`` and the step's metrics, still on the device (``read_metrics`` reads them:
@@ -71,6 +84,17 @@ class Pipeline:
         outputs = self.model(batch.origins, batch.directions)
         with phase("losses"):
             loss_terms = self.model.loss_dict(outputs, batch.rgba, step)
+        config = self.model.config
+        if config.depth_smoothness_weight > 0:
+            size = config.depth_smoothness_patch_size
+            with phase("data"):
+                origins, directions = self.datamanager.unseen_patches(
+                    config.depth_smoothness_patches, size, self.unseen_generator
+                )
+            loss_terms["depth_smoothness"] = self.model.unseen_depth_smoothness(
+                origins, directions, size, self.unseen_generator
+            )
+        with phase("losses"):
             loss = torch.stack(list(loss_terms.values())).sum()
         metrics = {k: v.detach() for k, v in loss_terms.items()}
         metrics["loss"] = loss.detach()
@@ -114,14 +138,28 @@ class Pipeline:
         state = {"model": self.model.state_dict(), "datamanager": self.datamanager.state_dict()}
         if self.step_generator is not self._generator:
             state["step_generator"] = self.step_generator.get_state()
+        if self.model.config.depth_smoothness_weight > 0:
+            state["unseen_generator"] = self.unseen_generator.get_state()
         return state
 
     def load_state_dict(self, state: dict) -> None:
         self.model.load_state_dict(state["model"])
         if "step_generator" in state and self.step_generator is not self._generator:
             self.step_generator.set_state(state["step_generator"])
+        if "unseen_generator" in state:
+            self.unseen_generator.set_state(state["unseen_generator"])
         if "datamanager" in state and self.datamanager.load_train:
             self.datamanager.load_state_dict(state["datamanager"])
+
+
+def check_patch_fits(model: FourieRFModelConfig, width: int, height: int) -> None:
+    """One clear error when the unseen-view patches of depth smoothness are larger than the training images."""
+    size = model.depth_smoothness_patch_size
+    if model.depth_smoothness_weight > 0 and size > min(width, height):
+        fail(
+            f"--pipeline.model.depth-smoothness-patch-size {size} does not fit the {width}×{height} training images",
+            f"pass a patch size of at most {min(width, height)}, or --pipeline.model.depth-smoothness-weight 0",
+        )
 
 
 def step_generator(generator: torch.Generator, device: torch.device, gpu_paths: bool) -> torch.Generator:

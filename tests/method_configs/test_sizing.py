@@ -53,6 +53,9 @@ def test_cost_estimates_scale_with_the_run() -> None:
     config.max_num_iterations *= 2
     assert estimate_seconds(config, threads=2) == pytest.approx(2 * one)
     assert estimate_seconds(config, threads=4) == pytest.approx(one)
+    model, rays = config.pipeline.model, config.pipeline.datamanager.rays_per_batch
+    model.depth_smoothness_weight = 0.1  # 4 unseen-view patches of 8×8 pixels: 256 more rays an iteration
+    assert estimate_seconds(config, threads=4) == pytest.approx(one * (rays + 256) / rays)
     assert 150 * 2**20 < checkpoint_bytes(config, rays=40000) < 300 * 2**20, "the paper's grid: ~209 MB"
     line = describe_cost(config, 40000, threads=2, cpu=True)
     assert "MB each, the last 3 kept" in line and "estimated training time" in line

@@ -9,7 +9,14 @@ from __future__ import annotations
 import pytest
 import torch
 
-from fourierf_plugin.model_components.losses import density_l1, grid_tv, mse, total_variation_1d, total_variation_2d
+from fourierf_plugin.model_components.losses import (
+    density_l1,
+    depth_smoothness,
+    grid_tv,
+    mse,
+    total_variation_1d,
+    total_variation_2d,
+)
 
 
 def _ramp_plane(c: int, h: int, w: int, a: float, b: float) -> torch.Tensor:
@@ -101,3 +108,25 @@ def test_mse_of_an_empty_batch_is_zero_not_nan() -> None:
     value = mse(pred, torch.zeros(0, 3))
     assert float(value.detach()) == 0.0
     value.backward()
+
+
+@pytest.mark.parametrize(("a", "b"), [(0.3, -0.2), (1.0, 0.0), (0.0, 2.5)])
+def test_depth_smoothness_of_a_tilted_plane(a: float, b: float) -> None:
+    """Patches of a planar depth a·row + b·col: every vertical difference is a, every horizontal one b."""
+    patches = _ramp_plane(5, 8, 8, a, b)
+    assert float(depth_smoothness(patches)) == pytest.approx(a * a + b * b, rel=1e-12, abs=1e-15)
+
+
+def test_depth_smoothness_of_constant_and_of_no_patches_is_zero() -> None:
+    assert float(depth_smoothness(torch.full((3, 4, 4), 0.6))) == 0.0
+    empty = torch.zeros(0, 8, 8, requires_grad=True)
+    value = depth_smoothness(empty)
+    value.backward()
+    assert float(value) == 0.0 and empty.grad is not None
+
+
+def test_depth_smoothness_penalises_a_step_by_its_height() -> None:
+    """One 8×8 patch with a step of height h between columns 3 and 4: one horizontal jump per row of 7 differences."""
+    patch = torch.zeros(1, 8, 8, dtype=torch.float64)
+    patch[:, :, 4:] = 0.5
+    assert float(depth_smoothness(patch)) == pytest.approx(0.25 / 7)

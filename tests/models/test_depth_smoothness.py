@@ -1,0 +1,109 @@
+"""RegNeRF's depth smoothness on unseen-view patches, through pipelines built the way ``fourierf-train`` builds them.
+
+Off by default (no extra rays rendered, no random numbers drawn); on, it adds one finite term whose gradient reaches
+the density grids; the patches are NDC rays on a forward-facing scene; a patch larger than the images is one clear
+error naming the flag.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from fourierf_plugin.utils.errors import UserError
+from tests.helpers import TINY_SCENE
+from tests.models.test_scene_effects import pipeline_for
+from tests.scenes import write_llff_scene
+
+ON = ("--pipeline.model.depth-smoothness-weight", "0.1", "--pipeline.model.depth-smoothness-patch-size", "4")
+
+
+@pytest.fixture(scope="module")
+def llff_scene(tmp_path_factory) -> Path:
+    """A 20-image synthetic LLFF scene with 8x6 images (tests/scenes.py)."""
+    return write_llff_scene(tmp_path_factory.mktemp("llff") / "scene")
+
+
+def test_off_by_default_renders_no_patches(llff_scene: Path, tmp_path: Path, monkeypatch) -> None:
+    pipeline = pipeline_for(llff_scene, tmp_path)
+    assert pipeline.model.config.depth_smoothness_weight == 0.0
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("no unseen-view patch may be drawn when depth smoothness is off")
+
+    monkeypatch.setattr(pipeline.datamanager, "unseen_patches", forbidden)
+    _, metrics = pipeline.train_step(0)
+    assert "depth_smoothness" not in metrics
+
+
+def test_the_term_is_finite_and_reaches_the_density_grids(llff_scene: Path, tmp_path: Path) -> None:
+    pipeline = pipeline_for(llff_scene, tmp_path, *ON)
+    model = pipeline.model
+    origins, directions = pipeline.datamanager.unseen_patches(3, 4, pipeline.unseen_generator)
+    model.prepare(0)
+    term = model.unseen_depth_smoothness(origins, directions, 4)
+    assert term.ndim == 0 and torch.isfinite(term) and float(term.detach()) >= 0.0
+    term.backward()
+    density = [p.grad for name, p in model.named_parameters() if name.startswith("field.density_grid")]
+    assert any(g is not None and bool(g.abs().sum() > 0) for g in density)
+    assert all(g is None or bool(torch.isfinite(g).all()) for g in density)
+    model.zero_grad()
+    loss, metrics = pipeline.train_step(1)
+    assert "depth_smoothness" in metrics and torch.isfinite(loss)
+    extra = float(metrics["loss"]) - sum(float(v) for k, v in metrics.items() if k not in ("loss", "psnr"))
+    assert extra == pytest.approx(0.0, abs=1e-6)  # the term is part of the loss
+
+
+def test_patches_are_ndc_rays_from_the_near_plane(llff_scene: Path, tmp_path: Path) -> None:
+    """NDC maps the near plane to z = -1: every patch ray starts there, and the rays point into the box (dz > 0)."""
+    pipeline = pipeline_for(llff_scene, tmp_path, *ON)
+    origins, directions = pipeline.datamanager.unseen_patches(5, 4, pipeline.unseen_generator)
+    assert origins.shape == directions.shape == (5 * 16, 3)
+    torch.testing.assert_close(origins[:, 2], torch.full((80,), -1.0), rtol=0, atol=1e-5)
+    assert bool((directions[:, 2] > 0).all())
+
+
+def test_a_patch_larger_than_the_images_is_one_clear_error(llff_scene: Path, tmp_path: Path) -> None:
+    with pytest.raises(UserError, match="depth-smoothness-patch-size 8 does not fit the 8×6"):
+        pipeline_for(llff_scene, tmp_path, "--pipeline.model.depth-smoothness-weight", "0.1")
+
+
+def test_turning_it_on_keeps_the_training_batches_and_their_jitter(llff_scene: Path, tmp_path: Path) -> None:
+    """The patches draw from their own stream: with the same parameters, steps after one with the term render the
+    same batch with the same jitter (the same MSE to the last bit) as without it."""
+    torch.manual_seed(0)  # the decoder's layers draw from the global RNG
+    plain = pipeline_for(llff_scene, tmp_path / "plain")
+    torch.manual_seed(0)
+    on = pipeline_for(llff_scene, tmp_path / "on", *ON)
+    for step in range(3):  # train_step computes the loss only: the parameters stay the same
+        _, metrics_plain = plain.train_step(step)
+        _, metrics_on = on.train_step(step)
+        assert float(metrics_plain["mse"]) == float(metrics_on["mse"]), step
+        assert "depth_smoothness" in metrics_on
+
+
+def test_a_checkpoint_keeps_the_patches_stream(llff_scene: Path, tmp_path: Path) -> None:
+    """Resuming draws the patches an uninterrupted run would have drawn next (the stream is in the state)."""
+    pipeline = pipeline_for(llff_scene, tmp_path, *ON)
+    state = pipeline.state_dict()
+    assert "unseen_generator" in state
+    following = pipeline.datamanager.unseen_patches(2, 4, pipeline.unseen_generator)
+    pipeline.unseen_generator.manual_seed(12345)  # elsewhere in the stream
+    pipeline.load_state_dict(state)
+    again = pipeline.datamanager.unseen_patches(2, 4, pipeline.unseen_generator)
+    for a, b in zip(following, again, strict=True):
+        torch.testing.assert_close(a, b, rtol=0, atol=0)
+    assert "unseen_generator" not in pipeline_for(llff_scene, tmp_path / "off").state_dict()
+
+
+def test_on_an_object_with_a_background_it_warns(tmp_path: Path, capsys) -> None:
+    """Misses read as the far plane, so silhouettes are true depth jumps: the user is told at start."""
+    pipeline_for(TINY_SCENE, tmp_path, "--pipeline.model.depth-smoothness-weight", "0.1")
+    assert "depth smoothness on a scene with a background" in capsys.readouterr().out
+
+
+def test_on_forward_facing_photos_it_does_not_warn(llff_scene: Path, tmp_path: Path, capsys) -> None:
+    pipeline_for(llff_scene, tmp_path, *ON)
+    assert "depth smoothness on a scene with a background" not in capsys.readouterr().out

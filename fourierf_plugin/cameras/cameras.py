@@ -16,6 +16,16 @@ from fourierf_plugin.cameras.distortion import (
 )
 
 
+def pinhole_directions(x: Tensor, y: Tensor, rotation: Tensor, normalize: bool) -> Tensor:
+    """World directions [..., N, 3] through OpenCV normalised coordinates ``x``, ``y`` [..., N] (y down) of cameras
+    with ``rotation`` [..., 3, 3] (OpenGL axes, looking down -z): z = -1 in the camera frame, unit if ``normalize``."""
+    dirs_cam = torch.stack([x, -y, -torch.ones_like(x)], dim=-1)
+    directions = dirs_cam @ rotation.transpose(-1, -2)
+    if normalize:
+        directions = directions / directions.norm(dim=-1, keepdim=True)
+    return directions
+
+
 @dataclass
 class Cameras:
     """A set of cameras sharing one image size and one camera model.
@@ -87,10 +97,7 @@ class Cameras:
         coeffs = self.distortion_of(index)
         if coeffs is None:  # the fast path: pinhole directions straight from the pixel grid
             x, y = self._normalized_pixel_centers(index, c2w.dtype)
-            dirs_cam = torch.stack([x, -y, -torch.ones_like(x)], dim=-1).reshape(-1, 3)
-            directions = dirs_cam @ c2w[:, :3].T
-            if normalize:
-                directions = directions / directions.norm(dim=-1, keepdim=True)
+            directions = pinhole_directions(x.reshape(-1), y.reshape(-1), c2w[:, :3], normalize)
         else:
             directions = self._distorted_directions(index, coeffs, normalize).to(c2w.dtype)
         origins = c2w[:, 3].expand_as(directions).contiguous()

@@ -11,7 +11,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from fourierf_plugin.cameras.cameras import Cameras
+from fourierf_plugin.cameras.cameras import Cameras, pinhole_directions
 
 
 def nearest_rotation(matrices: Tensor) -> Tensor:
@@ -54,12 +54,9 @@ def patch_rays(
     steps = torch.arange(size, dtype=dtype, device=device)
     v = corners[:, 1:2, None].to(dtype) + steps.view(1, size, 1)  # [P, size, 1]
     u = corners[:, 0:1, None].to(dtype) + steps.view(1, 1, size)  # [P, 1, size]
-    x = ((u + 0.5 - float(cameras.cx[0])) / float(cameras.fx[0])).expand(-1, size, size)
-    y = ((v + 0.5 - float(cameras.cy[0])) / float(cameras.fy[0])).expand(-1, size, size)
-    dirs_cam = torch.stack([x, -y, -torch.ones_like(x)], dim=-1).reshape(poses.shape[0], -1, 3)
-    directions = dirs_cam @ poses[:, :, :3].transpose(1, 2)
-    if normalize:
-        directions = directions / directions.norm(dim=-1, keepdim=True)
+    x = ((u + 0.5 - float(cameras.cx[0])) / float(cameras.fx[0])).expand(-1, size, size).reshape(len(poses), -1)
+    y = ((v + 0.5 - float(cameras.cy[0])) / float(cameras.fy[0])).expand(-1, size, size).reshape(len(poses), -1)
+    directions = pinhole_directions(x, y, poses[:, :, :3], normalize)
     origins = poses[:, None, :, 3].expand_as(directions)
     return origins.reshape(-1, 3).contiguous(), directions.reshape(-1, 3)
 

@@ -312,6 +312,14 @@ CASES: dict[str, Case] = {
     "train: negative plane leakage": Case(
         "train", train_with(f"{MODEL}.fourier.plane-leakage", "-1"), ("plane-leakage -1", ">= 0")
     ),
+    "train: negative depth-smoothness weight": out_of_range(f"{MODEL}.depth-smoothness-weight", "-1", ">= 0"),
+    "train: zero depth-smoothness patches": out_of_range(f"{MODEL}.depth-smoothness-patches", "0", ">= 1"),
+    "train: a depth-smoothness patch of one pixel": out_of_range(f"{MODEL}.depth-smoothness-patch-size", "1", ">= 2"),
+    "train: a depth-smoothness patch larger than the images": Case(
+        "train",
+        train_with(f"{MODEL}.depth-smoothness-weight", "0.1", f"{MODEL}.depth-smoothness-patch-size", "101"),
+        ("depth-smoothness-patch-size 101 does not fit the 100×100", "at most 100"),
+    ),
     "train: --steps-per-save 0": Case("train", train_with("--steps-per-save", "0"), ("--steps-per-save 0", ">= 1")),
     "train: --log-every 0": Case("train", train_with("--log-every", "0"), ("--log-every 0", ">= 1")),
     "train: step ratio 0": Case("train", train_with(f"{MODEL}.step-ratio", "0"), ("step-ratio 0", "> 0")),

@@ -20,6 +20,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from fourierf_plugin.field_components.activations import reviving_relu
 from fourierf_plugin.field_components.decoder import AppearanceDecoder
 from fourierf_plugin.field_components.generator import ZeroRFConfig
 from fourierf_plugin.field_components.tensor_grids import TensorCP, TensorGrid, TensorVM
@@ -49,6 +50,9 @@ class FieldConfig:
     """Added to the density feature before softplus (softplus(x - 10) ≈ 4.5e-5 at 0); ReLU takes no shift."""
     density_activation: Literal["softplus", "relu"] = "softplus"
     """Density activation; TensoRF uses softplus for synthetic and ReLU for LLFF scenes."""
+    revive_dead_density: bool = True
+    """ReLU only: while every density of a training batch is zero (a dead field), pass the gradient through the ReLU
+    as if it were the identity; a live batch is TensoRF's ReLU exactly. False = TensoRF's plain ReLU throughout."""
     n_voxels_init: int = 128**3
     """Voxel budget at the start (per-axis resolution follows the box's aspect ratio)."""
     n_voxels_final: int = 300**3
@@ -111,7 +115,8 @@ class FourierTensoRFField(PreparedField):
         raw = self.ops.summed_features(self.density_grid, self.filtered.density, self.normalize(xyz))
         if self.config.density_activation == "softplus":
             return F.softplus(raw + self.config.density_shift)
-        return F.relu(raw)  # TensoRF applies the shift to softplus only; relu(x - 10) would start dead
+        # TensoRF applies the shift to softplus only; relu(x - 10) would start dead
+        return reviving_relu(raw) if self.config.revive_dead_density else F.relu(raw)
 
     def rgb(self, xyz: Tensor, directions: Tensor | None) -> Tensor:
         """Colour in [0, 1] at world points [N, 3] (directions unit [N, 3], used only when view-dependent)."""

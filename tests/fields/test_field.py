@@ -273,6 +273,34 @@ def test_density_relu_activation() -> None:
     assert (field.density(_points(10)) == 0).all()
 
 
+def test_dead_relu_field_still_learns_unless_plain_relu_is_asked_for() -> None:
+    """A field whose density is zero everywhere (f0's near-constant field pushed below zero) gets a gradient telling
+    it to grow; ``revive_dead_density=False`` is TensoRF's ReLU, which leaves it dead."""
+    grads = {}
+    for revive in (True, False):
+        field = small_field("vm", density_activation="relu", revive_dead_density=revive)
+        _fill(field, 1.0, -0.5)
+        field.prepare(1.0, 1.0)
+        sigma = field.density(_points(10))
+        assert (sigma == 0).all()
+        (-sigma.sum()).backward()  # a loss that wants more density
+        grads[revive] = torch.stack([line.grad.sum() for line in field.density_grid.lines])
+    assert (grads[True] < 0).all()  # descent raises the lines' values, so the density
+    assert (grads[False] == 0).all()
+
+
+def test_live_relu_field_is_unchanged_by_revival() -> None:
+    grads = []
+    for revive in (True, False):
+        field = small_field("vm", density_activation="relu", revive_dead_density=revive)
+        field.prepare(1.0, 1.0)
+        sigma = field.density(_points(50))
+        assert (sigma > 0).any() and (sigma == 0).any()
+        (sigma * torch.arange(50.0)).sum().backward()
+        grads.append([p.grad.clone() for p in field.density_grid.parameters()])
+    assert all(torch.equal(a, b) for a, b in zip(*grads, strict=True))
+
+
 @pytest.mark.parametrize("feature", [1e4, -1e4, 30.0, -30.0])
 def test_density_finite_for_huge_features(feature: float) -> None:
     """Spec 7.2: softplus(x - 10) must stay finite and exact for |x| up to 1e4 (no exp overflow)."""

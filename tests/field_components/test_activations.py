@@ -1,0 +1,53 @@
+"""``reviving_relu``: TensoRF's ReLU while any density of the batch is positive, a pass-through gradient while none
+is (a dead field), and the plain ReLU wherever no gradient is taken."""
+
+from __future__ import annotations
+
+import torch
+
+from fourierf_plugin.field_components.activations import reviving_relu
+
+
+def _grad(fn, x: torch.Tensor, upstream: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    x = x.clone().requires_grad_()
+    y = fn(x)
+    y.backward(upstream)
+    return y.detach(), x.grad
+
+
+def test_live_batch_is_relu_to_the_last_bit() -> None:
+    x = torch.randn(1000, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    up = torch.randn(1000, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
+    y, g = _grad(reviving_relu, x, up)
+    y_ref, g_ref = _grad(torch.relu, x, up)
+    assert torch.equal(y, y_ref) and torch.equal(g, g_ref)
+    assert (g[x <= 0] == 0).all() and (g[x > 0] == up[x > 0]).all()
+
+
+def test_one_positive_density_keeps_the_batch_plain() -> None:
+    x = torch.tensor([-3.0, -1.0, 0.0, 1e-6])
+    up = torch.tensor([1.0, 2.0, 3.0, 4.0])
+    y, g = _grad(reviving_relu, x, up)
+    assert torch.equal(y, torch.tensor([0.0, 0.0, 0.0, 1e-6]))
+    assert torch.equal(g, torch.tensor([0.0, 0.0, 0.0, 4.0]))
+
+
+def test_dead_batch_passes_the_gradient_but_renders_zero() -> None:
+    x = torch.tensor([[-3.0, -1.0], [0.0, -1e-6]])
+    up = torch.tensor([[1.0, -2.0], [3.0, 4.0]])
+    y, g = _grad(reviving_relu, x, up)
+    assert torch.equal(y, torch.zeros(2, 2))  # the forward stays the ReLU: nothing renders
+    assert torch.equal(g, up)  # every sample tells the factors which way the loss wants the density
+
+
+def test_without_gradients_it_is_relu() -> None:
+    x = torch.tensor([-1.0, 2.0])
+    with torch.no_grad():
+        assert torch.equal(reviving_relu(x), torch.relu(x))
+    assert torch.equal(reviving_relu(x), torch.relu(x))  # a leaf without requires_grad
+
+
+def test_gradients_stay_finite_on_extreme_inputs() -> None:
+    for x in (torch.full((5,), -1e30), torch.tensor([-float("inf"), -1.0]), torch.tensor([1e30, -1e30])):
+        y, g = _grad(reviving_relu, x, torch.ones_like(x))
+        assert torch.isfinite(g).all() and (y >= 0).all()

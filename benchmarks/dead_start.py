@@ -9,8 +9,8 @@ Flags after ``--`` go to ``fourierf-train``.
 
 Why: at f0 0.01 the band holds little more than the density's mean, so the whole field is nearly one number; the
 real-scene preset's density is a ReLU, and one unlucky early Adam step can take that number below zero, after which
-nothing passes a gradient and the run renders black until the band opens (README, "A dead density field at the
-start"). Each seed builds the run ``fourierf-train`` would build (same parser, preset, budget rule and sizes; the
+nothing passes a gradient and the run renders black until the band opens (README, "A ReLU density that cannot
+stay dead"). Each seed builds the run ``fourierf-train`` would build (same parser, preset, budget rule and sizes; the
 schedules are those of the full ``--iters``) and steps it ``--steps`` times, reading the training MSE of every
 step. A seed counts as dead when its MSE is above ``--dead-mse`` (a black render of fern: ~0.3; a live field is
 below 0.1 within 10 steps) at more than half of the steps from 10 on. One JSON line per seed goes to ``--out``;
@@ -121,7 +121,8 @@ def report(args: argparse.Namespace) -> list[str]:
         "A dead density field at the start (fern, 3 views)",
         "python benchmarks/dead_start.py count|quality|report",
         "First iterations of many seeds (`count`: training MSE of each of the first 40 steps; dead = above 0.2 at more "
-        "than half of steps 10-40) and whole P-CPU runs of the seeds that died (`quality`, val views; 800 iterations, "
+        "than half of steps 10-40) and whole P-CPU runs of seeds that died and of seeds where revival acted but "
+        "TensoRF's ReLU lived (`quality`, val views; 800 iterations, "
         "1024 rays, 64³ → 128³, the default preset and budget rule: grid lr 0.08, constant TV 4). `revive` is the "
         "default ReLU (its gradient passes while every density of the batch is zero), `plain` is TensoRF's "
         "(`--pipeline.model.field.revive-dead-density False`).",
@@ -135,21 +136,52 @@ def report(args: argparse.Namespace) -> list[str]:
         dead = [r["seed"] for r in rs if r["dead"]]
         body.append(f"| {method} | {sides[0]}³ → {sides[1]}³ | {rays} | {device} | {label} | {len(dead)} of "
                     f"{len(rs)} | {' '.join(map(str, dead)) or '—'} |")  # fmt: skip
-    by_run = {(r["method"], tuple(r["sides"]), r["rays"], r["device"], r["seed"], r["label"]): r["mse"] for r in rows}
-    same = [k for k in by_run if k[-1] == "revive" and (*k[:-1], "plain") in by_run]
-    identical = [k for k in same if by_run[k] == by_run[(*k[:-1], "plain")]]
-    body += [
-        "",
-        f"Seeds whose 40 training MSEs are identical to the last bit with and without revival: "
-        f"{len(identical)} of {len(same)} (a batch with any positive density is TensoRF's ReLU exactly).",
-    ]
+    body += ["", "Where revival acted (CPU runs are deterministic, so 40 training MSEs that differ by a bit from the "
+                 "plain ReLU's mean some early batch had no positive density; most of those also lived without it):",
+             "", *identity_table(rows)]  # fmt: skip
+    if args.benchmark_seeds.exists():
+        seeds_rows = [json.loads(line) for line in args.benchmark_seeds.read_text().splitlines()]
+        body += ["", "The seeds the quality benchmarks use (`pmid.py`: 20211202, 1, 2), at P-CPU's and P-MID's sizes "
+                     "(where identical, their recorded runs stand under the reviving default; fourierf-vm's P-CPU "
+                     "run of seed 20211202 was rerun with revival, val 20.24 → 19.82, test 19.73 → 19.35; its P-MID "
+                     "run of seed 20211202 was not and stays TensoRF's ReLU; P-MID seeds 1 and 2 ran with revival):",
+                 "",
+                 *identity_table(seeds_rows)]  # fmt: skip
     quality = load_results(args.quality_out)
     if quality:
-        body += ["", "| seed | ReLU | val PSNR | test PSNR | train s |", "|---|---|---|---|---|"]
-        for r in sorted(quality.values(), key=lambda r: (r["seed"], r["setting"])):
-            body.append(f"| {r['seed']} | {r['setting']} | {r['val_psnr']:.2f} | {r['psnr']:.2f} | "
-                        f"{r['train_seconds']:.0f} |")  # fmt: skip
+        plain_dead = {r["seed"]: r["dead"] for r in rows if r["label"] == "plain" and tuple(r["sides"]) == (64, 128)}
+        by_seed: dict[int, dict[str, dict]] = {}
+        for r in quality.values():
+            by_seed.setdefault(r["seed"], {})[r["setting"]] = r
+        body += ["", "Whole P-CPU runs of both (val decides; test shown for the record):", "",
+                 "| seed | TensoRF's ReLU in the first 40 steps | val: plain → revive | test: plain → revive |",
+                 "|---|---|---|---|"]  # fmt: skip
+        for seed, runs in sorted(by_seed.items()):
+            if set(runs) != {"plain", "revive"}:
+                continue
+            p, r = runs["plain"], runs["revive"]
+            state = {True: "dead", False: "lived"}.get(plain_dead.get(seed), "not counted")
+            body.append(f"| {seed} | {state} | {p['val_psnr']:.2f} → {r['val_psnr']:.2f} "
+                        f"({r['val_psnr'] - p['val_psnr']:+.2f}) | {p['psnr']:.2f} → {r['psnr']:.2f} |")  # fmt: skip
     return body
+
+
+def identity_table(rows: list[dict]) -> list[str]:
+    """Per method and size, CPU seeds whose training MSEs are bit-identical with and without revival."""
+    by_run = {(r["method"], tuple(r["sides"]), r["rays"], r["seed"], r["label"]): r["mse"] for r in rows
+              if r["device"] == "cpu"}  # fmt: skip
+    groups: dict[tuple, tuple[list[int], list[int]]] = {}
+    for method, sides, rays, seed, label in by_run:
+        other = (method, sides, rays, seed, "plain")
+        if label == "revive" and other in by_run:
+            same, differ = groups.setdefault((method, sides, rays), ([], []))
+            (same if by_run[(method, sides, rays, seed, label)] == by_run[other] else differ).append(seed)
+    lines = ["| method | grid | rays | steps | identical | differ |", "|---|---|---|---|---|---|"]
+    for (method, sides, rays), (same, differ) in sorted(groups.items()):
+        steps = len(next(r["mse"] for r in rows if r["method"] == method and tuple(r["sides"]) == sides))
+        lines.append(f"| {method} | {sides[0]}³ → {sides[1]}³ | {rays} | {steps} | {len(same)} of "
+                     f"{len(same) + len(differ)} | {' '.join(map(str, sorted(differ))) or '—'} |")  # fmt: skip
+    return lines
 
 
 QUALITY_SETTINGS = {"revive": [], "plain": ["--pipeline.model.field.revive-dead-density", "False"]}
@@ -176,6 +208,8 @@ def main() -> None:
     ap.add_argument("--dead-mse", type=float, default=0.2)
     ap.add_argument("--label", default="revive", help="count: names the configuration the flags after -- make")
     ap.add_argument("--out", type=Path, default=RESULTS / "count.jsonl", help="count: one JSON line per seed")
+    ap.add_argument("--benchmark-seeds", type=Path, default=RESULTS / "benchmark_seeds.jsonl",
+                    help="report: count rows of the benchmarks' seeds (count --out this file)")  # fmt: skip
     ap.add_argument("--quality-out", type=Path, default=RESULTS / "quality.jsonl")
     ap.add_argument("--work", type=Path, default=REPO / "outputs" / "bench_dead_start")
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")

@@ -3,7 +3,7 @@
 Why: early in a FourieRF run the band holds little more than the density's mean, so the whole field is nearly one
 number. Under TensoRF's ReLU (the real-scene preset) one Adam step can take that number below zero everywhere; then
 no sample passes a gradient, Adam's momentum carries the factors further down, and the field renders nothing until
-the band opens far enough to vary it (README, "A dead density field at the start"). ``reviving_relu`` is the ReLU
+the band opens far enough to vary it (README, "A ReLU density that cannot stay dead"). ``reviving_relu`` is the ReLU
 forward and backward whenever any of the batch's densities is positive, so a live run is unchanged to the last bit;
 only when every one is zero does the gradient pass as if through the identity, which tells the factors which way the
 loss wants the density to go. A constant leak would not do: Adam normalises away its scale, so the leaked gradient of

@@ -4,6 +4,7 @@
     python benchmarks/dead_start.py count --label plain -- --pipeline.model.field.revive-dead-density False
     python benchmarks/dead_start.py quality --seed-list 6 7 11 -- --threads 1       # whole runs, both ReLUs
     python benchmarks/dead_start.py report                                          # BENCHMARKS.md section
+    python benchmarks/dead_start.py speed                # the activation alone against TensoRF's ReLU, interleaved
 
 Flags after ``--`` go to ``fourierf-train``.
 
@@ -21,9 +22,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import sys
 import tempfile
+import time
 from pathlib import Path
+
+import torch
 
 from fourierf_plugin.bench.protocol import (
     Run,
@@ -35,6 +40,7 @@ from fourierf_plugin.bench.protocol import (
 )
 from fourierf_plugin.engine.optimizers import build_optimizer, set_learning_rates
 from fourierf_plugin.engine.trainer import Trainer
+from fourierf_plugin.field_components.activations import reviving_relu
 from fourierf_plugin.method_configs import finalize
 from fourierf_plugin.scripts.train import parse_args
 from fourierf_plugin.utils.console import get_console
@@ -184,6 +190,32 @@ def identity_table(rows: list[dict]) -> list[str]:
     return lines
 
 
+def speed_stage(samples: int = 150_000, repeats: int = 30, inner: int = 20) -> None:
+    """The activation's forward and backward on one batch of densities, TensoRF's ReLU and the reviving one
+    interleaved in one process (the order alternates per repeat): median microseconds per call."""
+    generator = torch.Generator().manual_seed(0)
+    x0, upstream = torch.randn(samples, generator=generator), torch.randn(samples, generator=generator)
+
+    def call(fn) -> None:
+        x = x0.clone().requires_grad_()
+        fn(x).backward(upstream)
+
+    fns = {"relu": torch.relu, "reviving": reviving_relu}
+    times: dict[str, list[float]] = {name: [] for name in fns}
+    for name in fns:
+        for _ in range(inner):
+            call(fns[name])
+    for rep in range(repeats):
+        for name in sorted(fns, reverse=rep % 2 == 1):
+            start = time.perf_counter()
+            for _ in range(inner):
+                call(fns[name])
+            times[name].append((time.perf_counter() - start) / inner * 1e6)
+    for name, values in times.items():
+        print(f"{name}: median {statistics.median(values):.0f} µs per forward + backward of {samples} densities "
+              f"({torch.get_num_threads()} threads)")  # fmt: skip
+
+
 QUALITY_SETTINGS = {"revive": [], "plain": ["--pipeline.model.field.revive-dead-density", "False"]}
 
 
@@ -192,7 +224,7 @@ def main() -> None:
     extra = argv[argv.index("--") + 1 :] if "--" in argv else []
     argv = argv[: argv.index("--")] if "--" in argv else argv
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("stage", choices=("count", "quality", "report"))
+    ap.add_argument("stage", choices=("count", "quality", "report", "speed"))
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data", help="holds llff/fern")
     ap.add_argument("--lpips", type=Path, default=REPO.parent / "shared" / "lpips" / "lpips_alex_v0.1.pth")
     ap.add_argument("--method", default="fourierf-vm")
@@ -216,6 +248,9 @@ def main() -> None:
     args = ap.parse_args(argv)
     if args.stage == "report":
         print(update_benchmarks_md(args.markdown, BEGIN, END, report(args)))
+        return
+    if args.stage == "speed":
+        speed_stage()
         return
     if not (args.data / "llff/fern/poses_bounds.npy").exists():
         sys.exit(f"error: fern not found under {args.data}; pass --data FOLDER (it holds llff/fern)")

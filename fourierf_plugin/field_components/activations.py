@@ -19,20 +19,20 @@ from torch import Tensor
 class _RevivingReLU(torch.autograd.Function):
     @staticmethod
     def forward(ctx, x: Tensor) -> Tensor:  # type: ignore[override]
-        positive = x > 0
-        # Decided on the device: no host wait (the GPU paths count them).
-        passes = positive | ~positive.any()
-        ctx.save_for_backward(passes)
-        return torch.where(positive, x, torch.zeros((), dtype=x.dtype, device=x.device))
+        y = torch.relu(x)
+        dead = y.amax() <= 0  # decided on the device: no host wait (the GPU paths count them)
+        ctx.save_for_backward(y, dead)
+        return y
 
     @staticmethod
     def backward(ctx, grad: Tensor) -> Tensor:  # type: ignore[override]
-        (passes,) = ctx.saved_tensors
-        return torch.where(passes, grad, torch.zeros((), dtype=grad.dtype, device=grad.device))
+        y, dead = ctx.saved_tensors
+        relu_grad = torch.ops.aten.threshold_backward(grad, y, 0.0)  # what torch.relu's own backward computes
+        return torch.where(dead, grad, relu_grad)
 
 
 def reviving_relu(x: Tensor) -> Tensor:
     """ReLU whose gradient passes everywhere while all of ``x`` is at or below zero (a dead field), else plain."""
-    if not torch.is_grad_enabled() or not x.requires_grad:
+    if not torch.is_grad_enabled() or not x.requires_grad or x.numel() == 0:
         return torch.relu(x)
     return _RevivingReLU.apply(x)

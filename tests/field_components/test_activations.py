@@ -51,3 +51,10 @@ def test_gradients_stay_finite_on_extreme_inputs() -> None:
     for x in (torch.full((5,), -1e30), torch.tensor([-float("inf"), -1.0]), torch.tensor([1e30, -1e30])):
         y, g = _grad(reviving_relu, x, torch.ones_like(x))
         assert torch.isfinite(g).all() and (y >= 0).all()
+
+
+def test_an_empty_batch_is_relu() -> None:
+    x = torch.zeros(0, requires_grad=True)
+    y = reviving_relu(x)
+    y.sum().backward()
+    assert y.shape == (0,) and x.grad.shape == (0,)

@@ -103,20 +103,22 @@ def count_stage(args: argparse.Namespace, extra: list[str]) -> None:
 
 
 def quality_stage(args: argparse.Namespace, extra: list[str]) -> None:
-    """Whole P-CPU runs (800 iterations, 1024 rays, 64³ → 128³, the default preset and budget rule) of the given
-    seeds with and without revival: val PSNR, the test split evaluated too but not for choosing."""
+    """Whole 800-iteration runs (1024 rays, ``--sides``: P-CPU's 64³ → 128³ by default; the default preset and budget
+    rule) of the given seeds with and without revival: val PSNR, the test split evaluated too but not for choosing."""
     results = load_results(args.quality_out)
-    work = args.work
+    sides = tuple(args.sides)
+    grid = "pcpu" if sides == (64, 128) else f"{sides[0]}-{sides[1]}"
+    sizes = ["--pipeline.model.field.n-voxels-init", str(sides[0] ** 3),
+             "--pipeline.model.field.n-voxels-final", str(sides[1] ** 3)]  # fmt: skip
     for seed in args.seed_list:
         for label in args.settings:
-            flags = QUALITY_SETTINGS[label]
-            run = Run(args.method, 800, seed, f"pcpu-{label}")
+            run = Run(args.method, 800, seed, f"{grid}-{label}")
             if run.key in results:
                 continue
-            row = train_and_eval(run, args.data / "llff/fern", ["llff-data", "--num-views", "3"], work, args.lpips,
-                                 "fern", [*flags, *extra])  # fmt: skip
-            row |= evaluate(Path(row["run_dir"]), run.key, work, args.lpips, split="val")
-            row["setting"] = label
+            row = train_and_eval(run, args.data / "llff/fern", ["llff-data", "--num-views", "3"], args.work,
+                                 args.lpips, "fern", [*sizes, *QUALITY_SETTINGS[label], *extra])  # fmt: skip
+            row |= evaluate(Path(row["run_dir"]), run.key, args.work, args.lpips, split="val")
+            row |= {"setting": label, "sides": list(sides)}
             with args.quality_out.open("a") as f:
                 f.write(json.dumps(row) + "\n")
             print(f"{run.key}: val {row['val_psnr']:.2f}, test {row['psnr']:.2f}", flush=True)
@@ -127,9 +129,9 @@ def report(args: argparse.Namespace) -> list[str]:
         "A dead density field at the start (fern, 3 views)",
         "python benchmarks/dead_start.py count|quality|report",
         "First iterations of many seeds (`count`: training MSE of each of the first 40 steps; dead = above 0.2 at more "
-        "than half of steps 10-40) and whole P-CPU runs of seeds that died and of seeds where revival acted but "
-        "TensoRF's ReLU lived (`quality`, val views; 800 iterations, "
-        "1024 rays, 64³ → 128³, the default preset and budget rule: grid lr 0.08, constant TV 4). `revive` is the "
+        "than half of steps 10-40) and whole 800-iteration runs of seeds that died and of seeds where revival acted "
+        "but TensoRF's ReLU lived (`quality`, val views; 1024 rays, the grid in its column, the default preset and "
+        "budget rule: grid lr 0.08, constant TV 4). `revive` is the "
         "default ReLU (its gradient passes while every density of the batch is zero), `plain` is TensoRF's "
         "(`--pipeline.model.field.revive-dead-density False`).",
     )
@@ -155,19 +157,20 @@ def report(args: argparse.Namespace) -> list[str]:
                  *identity_table(seeds_rows)]  # fmt: skip
     quality = load_results(args.quality_out)
     if quality:
-        plain_dead = {r["seed"]: r["dead"] for r in rows if r["label"] == "plain" and tuple(r["sides"]) == (64, 128)}
-        by_seed: dict[int, dict[str, dict]] = {}
+        plain_dead = {(tuple(r["sides"]), r["seed"]): r["dead"] for r in rows
+                      if r["label"] == "plain" and r["rays"] == 1024 and r["device"] == "cpu"}  # fmt: skip
+        by_run: dict[tuple, dict[str, dict]] = {}
         for r in quality.values():
-            by_seed.setdefault(r["seed"], {})[r["setting"]] = r
-        body += ["", "Whole P-CPU runs of both (val decides; test shown for the record):", "",
-                 "| seed | TensoRF's ReLU in the first 40 steps | val: plain → revive | test: plain → revive |",
-                 "|---|---|---|---|"]  # fmt: skip
-        for seed, runs in sorted(by_seed.items()):
+            by_run.setdefault((tuple(r.get("sides", (64, 128))), r["seed"]), {})[r["setting"]] = r
+        body += ["", "Whole 800-iteration runs of both, 1024 rays (val decides; test shown for the record):", "",
+                 "| grid | seed | TensoRF's ReLU in the first 40 steps | val: plain → revive | test: plain → revive |",
+                 "|---|---|---|---|---|"]  # fmt: skip
+        for (sides, seed), runs in sorted(by_run.items()):
             if set(runs) != {"plain", "revive"}:
                 continue
             p, r = runs["plain"], runs["revive"]
-            state = {True: "dead", False: "lived"}.get(plain_dead.get(seed), "not counted")
-            body.append(f"| {seed} | {state} | {p['val_psnr']:.2f} → {r['val_psnr']:.2f} "
+            state = {True: "dead", False: "lived"}.get(plain_dead.get((sides, seed)), "not counted")
+            body.append(f"| {sides[0]}³ → {sides[1]}³ | {seed} | {state} | {p['val_psnr']:.2f} → {r['val_psnr']:.2f} "
                         f"({r['val_psnr'] - p['val_psnr']:+.2f}) | {p['psnr']:.2f} → {r['psnr']:.2f} |")  # fmt: skip
     return body
 

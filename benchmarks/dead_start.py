@@ -38,8 +38,8 @@ from fourierf_plugin.bench.protocol import (
     train_and_eval,
     update_benchmarks_md,
 )
-from fourierf_plugin.engine.optimizers import build_optimizer, set_learning_rates
-from fourierf_plugin.engine.trainer import Trainer
+from fourierf_plugin.engine.optimizers import build_optimizer
+from fourierf_plugin.engine.trainer import Trainer, optimisation_step
 from fourierf_plugin.field_components.activations import reviving_relu
 from fourierf_plugin.method_configs import finalize
 from fourierf_plugin.scripts.train import parse_args
@@ -60,13 +60,9 @@ def first_steps(argv: list[str], steps: int) -> list[float]:
     optimizer = build_optimizer(config.optimizer, model.param_groups(), 0, reset_steps)
     mses = []
     for step in range(steps):
-        set_learning_rates(optimizer, config.optimizer, step, reset_steps, config.max_num_iterations)
-        loss, metrics = pipeline.train_step(step)
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        optimizer.step()
-        if pipeline.after_step(step).params_replaced:
-            optimizer = build_optimizer(config.optimizer, model.param_groups(), step + 1, reset_steps)
+        optimizer, metrics, _ = optimisation_step(
+            pipeline, optimizer, config.optimizer, step, reset_steps, config.max_num_iterations
+        )
         mses.append(pipeline.read_metrics(metrics)["mse"])
     return mses
 

@@ -96,6 +96,29 @@ class _DeferredStop:
         self._previous = {}
 
 
+def optimisation_step(
+    pipeline: Pipeline,
+    optimizer: torch.optim.Optimizer,
+    config: OptimizerConfig,
+    step: int,
+    reset_steps: list[int],
+    max_iters: int,
+) -> tuple[torch.optim.Optimizer, dict[str, torch.Tensor], float]:
+    """One iteration as a run makes it: the learning rates of ``step``, loss, backward, the optimiser's step and the
+    structure changes after it. Returns the optimiser for the next step (rebuilt where parameters were replaced), the
+    step's metrics (still on the device) and the learning-rate scale."""
+    lr_scale = set_learning_rates(optimizer, config, step, reset_steps, max_iters)
+    loss, metrics = pipeline.train_step(step)
+    with phase("backward"):
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+    with phase("optimizer"):
+        optimizer.step()
+    if pipeline.after_step(step).params_replaced:
+        optimizer = build_optimizer(config, pipeline.model.param_groups(), step + 1, reset_steps)
+    return optimizer, metrics, lr_scale
+
+
 class Trainer:
     config: TrainerConfig
 
@@ -227,16 +250,9 @@ class Trainer:
         with _DeferredStop() as interrupt, TaskProgress(c.max_num_iterations, self.start_step) as progress:
             for step in range(self.start_step, c.max_num_iterations):
                 with timer or contextlib.nullcontext(), phase("other"):
-                    lr_scale = set_learning_rates(optimizer, c.optimizer, step, reset_steps, c.max_num_iterations)
-                    loss, metrics = self.pipeline.train_step(step)
-                    with phase("backward"):
-                        optimizer.zero_grad(set_to_none=True)
-                        loss.backward()
-                    with phase("optimizer"):
-                        optimizer.step()
-                    changes = self.pipeline.after_step(step)
-                    if changes.params_replaced:
-                        optimizer = build_optimizer(c.optimizer, model.param_groups(), step + 1, reset_steps)
+                    optimizer, metrics, lr_scale = optimisation_step(
+                        self.pipeline, optimizer, c.optimizer, step, reset_steps, c.max_num_iterations
+                    )
                 done = step + 1
                 f_density, f_color = model.cutoffs(step)
                 log_now = done % c.log_every == 0 or done == c.max_num_iterations

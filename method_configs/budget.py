@@ -31,14 +31,14 @@ fourierf-vm TV 4 22.57, tensorf-vm TV 6 22.45)."""
 
 REAL_TV_WEIGHT = 4.0
 """Forward-facing scenes, both methods: a constant TV weight on the density and appearance planes (the paper's 1.0,
-TensoRF's decaying to 0.1). Fern val at grid lr 0.08, 800 iterations, mean of 3 seeds: fourierf-vm constant TV 1
-19.85, 4 20.05 (TensoRF's ReLU; 19.91 with seed 20211202 rerun under the reviving ReLU; one seed: TV 2 19.88);
-tensorf-vm constant TV 1 18.20, 4 19.02 (one seed: TV 2 18.75). 3000 iterations (P-MID), one seed: fourierf-vm
-constant TV 1 21.18 (decaying, band open by step 750: 21.06), TV 4 21.36; tensorf-vm decaying TV 1 18.83, constant TV
-4 20.84. At 3000 iterations on P-CPU's 128³ grid, one seed, it lost instead (constant TV 1 -> 4: fourierf-vm 21.22 ->
-20.94, tensorf-vm 21.15 -> 20.94), where TensoRF does not overfit. The stronger TV lifts TensoRF more than FourieRF:
-it shrinks the P-MID fern test gap from +2.85 to +0.20 dB (3 seeds), and with Floaters-No-More on top tensorf-vm
-leads by 0.59 dB on test (3 seeds; BENCHMARKS.md); on fourierf-vm it does nothing there (val 21.36 -> 21.33)."""
+TensoRF's decaying to 0.1). Fern val at grid lr 0.08, 800 iterations, mean of 3 seeds: fourierf-vm constant TV 1 19.85,
+4 20.05 (one seed: TV 2 19.88); tensorf-vm constant TV 1 18.20, 4 19.02 (one seed: TV 2 18.75). 3000 iterations (P-MID),
+one seed: fourierf-vm constant TV 1 21.18 (decaying, band open by step 750: 21.06), TV 4 21.36; tensorf-vm decaying TV 1
+18.83, constant TV 4 20.84. At 3000 iterations on P-CPU's 128³ grid, one seed, it lost instead (constant TV 1 -> 4:
+fourierf-vm 21.22 -> 20.94, tensorf-vm 21.15 -> 20.94), where TensoRF does not overfit. The stronger TV lifts TensoRF
+more than FourieRF: it shrinks the P-MID fern test gap from +2.85 to +0.20 dB (3 seeds), and with Floaters-No-More on
+top tensorf-vm leads by 0.59 dB on test (3 seeds; BENCHMARKS.md); on fourierf-vm it does nothing there (val 21.36 ->
+21.33)."""
 
 
 def _tv(weight: float) -> dict[str, Any]:

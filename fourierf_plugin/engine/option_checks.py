@@ -110,6 +110,7 @@ RULES: tuple[Rule, ...] = (
     Rule(f"{_MODEL}.field.appearance_dim", int_at_least(1), "an integer >= 1", "27"),
     Rule(f"{_MODEL}.field.hidden_dim", int_at_least(1), "an integer >= 1", "128"),
     Rule(f"{_MODEL}.field.init_scale", optional(positive), "a standard deviation > 0 (or omitted)", "0.1"),
+    Rule(f"{_MODEL}.field.revive_patience", int_at_least(1), "a count of training batches >= 1", "16"),
     Rule("optimizer.lr_grids", positive, "a learning rate > 0", "0.02"),
     Rule("optimizer.lr_networks", positive, "a learning rate > 0", "1e-3"),
     Rule("optimizer.lr_generator", positive, "a learning rate > 0", "2e-3"),

@@ -3,36 +3,76 @@
 Why: early in a FourieRF run the band holds little more than the density's mean, so the whole field is nearly one
 number. Under TensoRF's ReLU (the real-scene preset) one Adam step can take that number below zero everywhere; then
 no sample passes a gradient, Adam's momentum carries the factors further down, and the field renders nothing until
-the band opens far enough to vary it (README, "A ReLU density that cannot stay dead"). ``reviving_relu`` is the ReLU
-forward and backward whenever any of the batch's densities is positive, so a live run is unchanged to the last bit;
-only when every one is zero does the gradient pass as if through the identity, which tells the factors which way the
-loss wants the density to go. A constant leak would not do: Adam normalises away its scale, so the leaked gradient of
-the empty space pulls on every factor of a live field as hard as the real one (tried: fern val −2.9 dB).
+the band opens far enough to vary it (README, "A ReLU density that cannot stay dead"). ``RevivingReLU`` is the ReLU
+forward and backward except on a training batch with no positive density in a field that is dead: one that had lit
+an earlier batch, or that has been dark for ``patience`` batches since its start. There the gradient passes as if
+through the identity, which tells the factors which way the loss wants the density to go. The two cases differ
+because a freshly initialised field is often dark for a few batches and comes back by itself (fern: up to 7), while a
+field that went dark after rendering something stayed dark until the band opened in every seed counted, and the
+sooner it is revived the better it ends (measured: ``benchmarks/dead_start.py``). A constant leak would not do: Adam
+normalises away its scale, so the leaked gradient of the empty space pulls on every factor of a live field as hard as
+the real one (tried: fern val −2.9 dB).
 """
 
 from __future__ import annotations
 
 import torch
-from torch import Tensor
+from torch import Tensor, nn
 
 
 class _RevivingReLU(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, x: Tensor) -> Tensor:  # type: ignore[override]
+    def forward(ctx, x: Tensor, dark_batches: Tensor, lit: Tensor, patience: int) -> Tensor:  # type: ignore[override]
         y = torch.relu(x)
-        dead = y.amax() <= 0  # decided on the device: no host wait (the GPU paths count them)
-        ctx.save_for_backward(y, dead)
+        dark = y.amax() <= 0  # decided on the device: no host wait (the GPU paths count them)
+        dark_batches.copy_(torch.where(dark, dark_batches + 1, 0))  # batches in a row without a positive density
+        revive = dark & (lit | (dark_batches >= patience))
+        lit.logical_or_(~dark)
+        ctx.save_for_backward(y, revive)
         return y
 
     @staticmethod
-    def backward(ctx, grad: Tensor) -> Tensor:  # type: ignore[override]
-        y, dead = ctx.saved_tensors
+    def backward(ctx, grad: Tensor) -> tuple[Tensor, None, None, None]:  # type: ignore[override]
+        y, revive = ctx.saved_tensors
         relu_grad = torch.ops.aten.threshold_backward(grad, y, 0.0)  # what torch.relu's own backward computes
-        return torch.where(dead, grad, relu_grad)
+        return torch.where(revive, grad, relu_grad), None, None, None
 
 
-def reviving_relu(x: Tensor) -> Tensor:
-    """ReLU whose gradient passes everywhere while all of ``x`` is at or below zero (a dead field), else plain."""
+def reviving_relu(
+    x: Tensor, dark_batches: Tensor | None = None, lit: Tensor | None = None, patience: int = 1
+) -> Tensor:
+    """ReLU whose gradient passes everywhere on a batch with no positive density once the field is dead: ``lit``
+    (some earlier batch had a positive density) or ``dark_batches`` in a row reached ``patience``. Both are updated in
+    place; without them every dark batch revives. Plain ReLU wherever no gradient is taken."""
     if not torch.is_grad_enabled() or not x.requires_grad or x.numel() == 0:
         return torch.relu(x)
-    return _RevivingReLU.apply(x)
+    if dark_batches is None:
+        dark_batches = torch.zeros((), dtype=torch.long, device=x.device)
+    if lit is None:
+        lit = torch.zeros((), dtype=torch.bool, device=x.device)
+    return _RevivingReLU.apply(x, dark_batches, lit, patience)
+
+
+class RevivingReLU(nn.Module):
+    """``reviving_relu`` with its count of dark training batches and whether any batch was lit kept (and
+    checkpointed) as buffers."""
+
+    def __init__(self, patience: int) -> None:
+        super().__init__()
+        if patience < 1:
+            raise ValueError(f"patience must be at least 1 training batch, got {patience}")
+        self.patience = patience
+        self.register_buffer("dark_batches", torch.zeros((), dtype=torch.long))
+        self.register_buffer("lit", torch.zeros((), dtype=torch.bool))
+
+    def forward(self, x: Tensor) -> Tensor:
+        return reviving_relu(x, self.dark_batches, self.lit, self.patience)
+
+    def _load_from_state_dict(self, state_dict, prefix, *args) -> None:  # type: ignore[override]
+        # checkpoints written before these existed: no dark batch counted, and a run that was saved had been lit
+        state_dict.setdefault(prefix + "dark_batches", torch.zeros((), dtype=torch.long))
+        state_dict.setdefault(prefix + "lit", torch.ones((), dtype=torch.bool))
+        super()._load_from_state_dict(state_dict, prefix, *args)
+
+    def extra_repr(self) -> str:
+        return f"patience={self.patience}"

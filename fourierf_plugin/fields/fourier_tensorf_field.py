@@ -20,7 +20,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from fourierf_plugin.field_components.activations import reviving_relu
+from fourierf_plugin.field_components.activations import RevivingReLU
 from fourierf_plugin.field_components.decoder import AppearanceDecoder
 from fourierf_plugin.field_components.generator import ZeroRFConfig
 from fourierf_plugin.field_components.tensor_grids import TensorCP, TensorGrid, TensorVM
@@ -51,8 +51,12 @@ class FieldConfig:
     density_activation: Literal["softplus", "relu"] = "softplus"
     """Density activation; TensoRF uses softplus for synthetic and ReLU for LLFF scenes."""
     revive_dead_density: bool = True
-    """ReLU only: while every density of a training batch is zero (a dead field), pass the gradient through the ReLU
-    as if it were the identity; a live batch is TensoRF's ReLU exactly. False = TensoRF's plain ReLU throughout."""
+    """ReLU only: on a training batch with no positive density in a dead field (one that lit an earlier batch, or has
+    been dark for ``revive_patience`` batches since its start), pass the gradient through the ReLU as if it were the
+    identity; otherwise TensoRF's ReLU exactly. False = TensoRF's plain ReLU throughout."""
+    revive_patience: int = 16
+    """Dark training batches in a row, from the start, before a field that never lit is revived. A fresh fern field
+    is often dark for a few batches and comes back by itself (up to 7 counted; benchmarks/dead_start.py)."""
     n_voxels_init: int = 128**3
     """Voxel budget at the start (per-axis resolution follows the box's aspect ratio)."""
     n_voxels_final: int = 300**3
@@ -86,6 +90,8 @@ class FourierTensoRFField(PreparedField):
         app_in = sum(config.appearance_components) if config.decomposition == "vm" else config.appearance_components[0]
         self.basis = nn.Linear(app_in, config.appearance_dim, bias=False)
         self.decoder = AppearanceDecoder(config.appearance_dim, config.hidden_dim, view_dependent)
+        revive = config.density_activation == "relu" and config.revive_dead_density
+        self.density_relu = RevivingReLU(config.revive_patience) if revive else None
 
     # -- filtering --------------------------------------------------------------------------------------------
     def filter(self, f_density: float, f_color: float) -> FilteredGrids:
@@ -116,7 +122,7 @@ class FourierTensoRFField(PreparedField):
         if self.config.density_activation == "softplus":
             return F.softplus(raw + self.config.density_shift)
         # TensoRF applies the shift to softplus only; relu(x - 10) would start dead
-        return reviving_relu(raw) if self.config.revive_dead_density else F.relu(raw)
+        return self.density_relu(raw) if self.density_relu is not None else F.relu(raw)
 
     def rgb(self, xyz: Tensor, directions: Tensor | None) -> Tensor:
         """Colour in [0, 1] at world points [N, 3] (directions unit [N, 3], used only when view-dependent)."""

@@ -1,11 +1,13 @@
 """``reviving_relu``: TensoRF's ReLU while any density of the batch is positive, a pass-through gradient while none
-is (a dead field), and the plain ReLU wherever no gradient is taken."""
+is (a dead field), and the plain ReLU wherever no gradient is taken; ``RevivingReLU`` waits ``patience`` dark batches
+in a row before it passes the gradient."""
 
 from __future__ import annotations
 
+import pytest
 import torch
 
-from fourierf_plugin.field_components.activations import reviving_relu
+from fourierf_plugin.field_components.activations import RevivingReLU, reviving_relu
 
 
 def _grad(fn, x: torch.Tensor, upstream: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -58,3 +60,46 @@ def test_an_empty_batch_is_relu() -> None:
     y = reviving_relu(x)
     y.sum().backward()
     assert y.shape == (0,) and x.grad.shape == (0,)
+
+
+def _passes(relu: RevivingReLU, batches: list[torch.Tensor]) -> list[bool]:
+    """Per batch, whether the gradient of its first (negative) sample passed: only while reviving."""
+    return [bool((_grad(relu, x, torch.ones(2))[1][0] != 0).item()) for x in batches]
+
+
+DARK, LIT = torch.tensor([-1.0, -2.0]), torch.tensor([-1.0, 0.5])
+
+
+def test_a_field_dark_from_its_start_waits_patience_batches() -> None:
+    relu = RevivingReLU(patience=3)
+    assert _passes(relu, [DARK, DARK, DARK, DARK]) == [False, False, True, True]
+
+
+def test_a_field_that_went_dark_after_lighting_revives_at_once() -> None:
+    relu = RevivingReLU(patience=3)
+    # dark from the start for two batches (it comes back by itself), then lit, then dead: revived at once
+    assert _passes(relu, [DARK, DARK, LIT, DARK, DARK, LIT]) == [False, False, False, True, True, False]
+    assert relu.lit.item() and relu.dark_batches.item() == 0
+
+
+def test_patience_one_revives_every_dark_batch() -> None:
+    assert _passes(RevivingReLU(patience=1), [DARK, LIT, DARK]) == [True, False, True]
+
+
+def test_checkpoints_from_before_the_buffers_load_as_lit() -> None:
+    relu = RevivingReLU(patience=3)
+    relu.load_state_dict({})
+    assert relu.lit.item() and relu.dark_batches.item() == 0
+    assert _passes(relu, [DARK]) == [True]
+
+
+def test_renders_do_not_count_dark_batches() -> None:
+    relu = RevivingReLU(patience=1)
+    with torch.no_grad():
+        relu(torch.tensor([-1.0, -2.0]))
+    assert relu.dark_batches.item() == 0
+
+
+def test_patience_below_one_is_refused() -> None:
+    with pytest.raises(ValueError, match="at least 1"):
+        RevivingReLU(patience=0)

@@ -273,20 +273,45 @@ def test_density_relu_activation() -> None:
     assert (field.density(_points(10)) == 0).all()
 
 
-def test_dead_relu_field_still_learns_unless_plain_relu_is_asked_for() -> None:
-    """A field whose density is zero everywhere (f0's near-constant field pushed below zero) gets a gradient telling
-    it to grow; ``revive_dead_density=False`` is TensoRF's ReLU, which leaves it dead."""
-    grads = {}
-    for revive in (True, False):
-        field = small_field("vm", density_activation="relu", revive_dead_density=revive)
-        _fill(field, 1.0, -0.5)
+def _dark_batch_grads(field, batches: int) -> list[torch.Tensor]:
+    """Sum of the density lines' gradients of each of ``batches`` training batches on a field dead everywhere."""
+    grads = []
+    for _ in range(batches):
+        field.zero_grad()
         field.prepare(1.0, 1.0)
         sigma = field.density(_points(10))
         assert (sigma == 0).all()
         (-sigma.sum()).backward()  # a loss that wants more density
-        grads[revive] = torch.stack([line.grad.sum() for line in field.density_grid.lines])
-    assert (grads[True] < 0).all()  # descent raises the lines' values, so the density
-    assert (grads[False] == 0).all()
+        grads.append(torch.stack([line.grad.sum() for line in field.density_grid.lines]))
+    return grads
+
+
+def test_dead_relu_field_still_learns_unless_plain_relu_is_asked_for() -> None:
+    """A field whose density has been zero everywhere since its start gets a gradient telling it to grow from its
+    ``revive_patience``-th dark batch on; ``revive_dead_density=False`` is TensoRF's ReLU, which leaves it dead."""
+    patience = 3
+    for revive in (True, False):
+        field = small_field("vm", density_activation="relu", revive_dead_density=revive, revive_patience=patience)
+        _fill(field, 1.0, -0.5)
+        grads = _dark_batch_grads(field, patience + 1)
+        assert all((g == 0).all() for g in grads[: patience - 1])  # a few dark batches: TensoRF's ReLU
+        for g in grads[patience - 1 :]:
+            assert (g < 0).all() if revive else (g == 0).all()  # descent raises the lines' values, so the density
+
+
+def test_dark_batch_count_is_checkpointed_and_old_checkpoints_load() -> None:
+    field = small_field("vm", density_activation="relu", revive_patience=3)
+    _fill(field, 1.0, -0.5)
+    _dark_batch_grads(field, 2)
+    state = field.state_dict()
+    assert state["density_relu.dark_batches"].item() == 2
+    resumed = small_field("vm", density_activation="relu", revive_patience=3)
+    resumed.load_state_dict(state)
+    assert (_dark_batch_grads(resumed, 1)[0] < 0).all()  # the third dark batch in a row, across the resume
+    assert not state["density_relu.lit"].item()  # dark since its start: the patience still applies
+    del state["density_relu.dark_batches"], state["density_relu.lit"]  # a checkpoint from before they existed
+    resumed.load_state_dict(state)
+    assert resumed.density_relu.dark_batches.item() == 0 and resumed.density_relu.lit.item()
 
 
 def test_live_relu_field_is_unchanged_by_revival() -> None:

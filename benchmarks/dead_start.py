@@ -108,7 +108,7 @@ def count_stage(args: argparse.Namespace, extra: list[str]) -> None:
                           f"{mses[0]:.3f} {mses[min(9, len(mses) - 1)]:.3f} {mses[min(19, len(mses) - 1)]:.3f} "
                           f"{mses[-1]:.3f}")  # fmt: skip
             row = {"label": args.label, "method": args.method, "seed": seed, "sides": list(args.sides),
-                   "rays": args.rays, "device": args.device, "extra": extra, "dead": died, "mse": mses,
+                   "rays": args.rays, "device": args.device, "extra": extra, "mse": mses,
                    "dark_steps": [i for i, d in enumerate(dark) if d]}  # fmt: skip
             with args.out.open("a") as f:
                 f.write(json.dumps(row) + "\n")
@@ -165,7 +165,7 @@ def report(args: argparse.Namespace) -> list[str]:
              "", *identity_table(rows)]  # fmt: skip
     body += ["", "The default against reviving every dark batch: where the field lit its first batch the two are the "
                  "same rule for the rest of the run, so the seeds that died at 64³ train as under `revive1`:", "",
-             *[line for line in identity_table(rows, "revive1") if "revive16" not in line]]  # fmt: skip
+             *identity_table([r for r in rows if r["label"] != "revive16"], "revive1")]  # fmt: skip
     body += ["", "Which batches were dark (no positive density; first 40 steps): under TensoRF's ReLU a fresh field is "
                  "often dark for a few batches and comes back by itself, while a dead one stays dark until the band "
                  "opens (steps 70-75 at 64³, past the 40 counted). Every transient stretch starts at step 0 (the "
@@ -203,9 +203,10 @@ def report(args: argparse.Namespace) -> list[str]:
         for (sides, seed), runs in sorted(by_run.items()):
             if "plain" not in runs or len(runs) < 2:
                 continue
+            default_mse = mse.get((sides, seed, "revive"))
             for twin in ("plain", "revive1"):  # the default's first 40 steps equal a recorded run's: the same run
-                same = mse.get((sides, seed, "revive")) == mse.get((sides, seed, twin)) is not None
-                if "revive" not in runs and same and twin in runs:
+                known = "revive" not in runs and twin in runs and default_mse is not None
+                if known and default_mse == mse.get((sides, seed, twin)):
                     runs["revive"] = runs[twin] | {"twin": twin}
             state = {True: "dead", False: "lived"}.get(plain_dead.get((sides, seed)), "not counted")
             cells = {}

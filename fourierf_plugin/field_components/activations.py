@@ -38,24 +38,10 @@ class _RevivingReLU(torch.autograd.Function):
         return torch.where(revive, grad, relu_grad), None, None, None
 
 
-def reviving_relu(
-    x: Tensor, dark_batches: Tensor | None = None, lit: Tensor | None = None, patience: int = 1
-) -> Tensor:
-    """ReLU whose gradient passes everywhere on a batch with no positive density once the field is dead: ``lit``
-    (some earlier batch had a positive density) or ``dark_batches`` in a row reached ``patience``. Both are updated in
-    place; without them every dark batch revives. Plain ReLU wherever no gradient is taken."""
-    if not torch.is_grad_enabled() or not x.requires_grad or x.numel() == 0:
-        return torch.relu(x)
-    if dark_batches is None:
-        dark_batches = torch.zeros((), dtype=torch.long, device=x.device)
-    if lit is None:
-        lit = torch.zeros((), dtype=torch.bool, device=x.device)
-    return _RevivingReLU.apply(x, dark_batches, lit, patience)
-
-
 class RevivingReLU(nn.Module):
-    """``reviving_relu`` with its count of dark training batches and whether any batch was lit kept (and
-    checkpointed) as buffers."""
+    """ReLU whose gradient passes everywhere on a training batch with no positive density once the field is dead:
+    ``lit`` (an earlier batch had a positive density) or ``dark_batches`` in a row reached ``patience`` (1: every dark
+    batch). Both are buffers, kept in checkpoints. Plain ReLU wherever no gradient is taken."""
 
     def __init__(self, patience: int) -> None:
         super().__init__()
@@ -66,7 +52,9 @@ class RevivingReLU(nn.Module):
         self.register_buffer("lit", torch.zeros((), dtype=torch.bool))
 
     def forward(self, x: Tensor) -> Tensor:
-        return reviving_relu(x, self.dark_batches, self.lit, self.patience)
+        if not torch.is_grad_enabled() or not x.requires_grad or x.numel() == 0:
+            return torch.relu(x)  # renders and the occupancy grid; amax of an empty batch would raise
+        return _RevivingReLU.apply(x, self.dark_batches, self.lit, self.patience)
 
     def _load_from_state_dict(self, state_dict, prefix, *args) -> None:  # type: ignore[override]
         # checkpoints written before these existed: no dark batch counted, and a run that was saved had been lit

@@ -1,13 +1,18 @@
-"""``reviving_relu``: TensoRF's ReLU while any density of the batch is positive, a pass-through gradient while none
-is (a dead field), and the plain ReLU wherever no gradient is taken; ``RevivingReLU`` waits ``patience`` dark batches
-in a row before it passes the gradient."""
+"""``RevivingReLU``: TensoRF's ReLU while any density of the batch is positive, a pass-through gradient on a batch with
+none in a dead field (lit before, or dark for ``patience`` batches since its start), and the plain ReLU wherever no
+gradient is taken. With patience 1 every dark batch revives."""
 
 from __future__ import annotations
 
 import pytest
 import torch
 
-from fourierf_plugin.field_components.activations import RevivingReLU, reviving_relu
+from fourierf_plugin.field_components.activations import RevivingReLU
+
+
+def reviving_relu(x: torch.Tensor) -> torch.Tensor:
+    """A fresh activation reviving at the first dark batch: one call is one batch."""
+    return RevivingReLU(patience=1)(x)
 
 
 def _grad(fn, x: torch.Tensor, upstream: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -355,6 +355,7 @@ CASES: dict[str, Case] = {
         "train", train_with("--optimizer.betas-after-reset", "0.9", "1.0"), ("--optimizer.betas-after-reset 0.9 1.0",)
     ),
     "train: TV decay ratio <= 0": out_of_range(f"{MODEL}.tv-decay-ratio", "0", "> 0"),
+    "train: revive patience 0": out_of_range(f"{MODEL}.field.revive-patience", "0", ">= 1"),
     # -- train: resuming ---------------------------------------------------------------------------------------------
     "train: resume a config from another version": Case(
         "train",

@@ -257,6 +257,9 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
             ]
             for weight in (0.1, 1, 10)
         },
+        # Session 23: around the P-MID choice on seeds 1 and 2 (one GPU call): a stronger TV, a band open by step 450.
+        "lr0.08-tvconst-ramp0.2667-tv6": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667", *tv_weights(6.0)],
+        "lr0.08-tvconst-ramp0.15-tv4": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.15", *tv_weights(4.0)],
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband")

@@ -149,6 +149,8 @@ F0_DENSITY, F0_COLOR = "--pipeline.model.fourier.f0-density", "--pipeline.model.
 FNM = ["--pipeline.model.floaters-gradient-scaling", "True"]
 IN_BAND = ["--pipeline.model.fourier.init-in-band", "True"]
 RULE_LEGO = [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.04"]
+REVIVE1 = ["--pipeline.model.field.revive-patience", "1"]
+PLAIN_RELU = ["--pipeline.model.field.revive-dead-density", "False"]
 
 
 def tv_weights(weight: float) -> list[str]:
@@ -260,6 +262,13 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # Session 23: around the P-MID choice on seeds 1 and 2 (one GPU call): a stronger TV, a band open by step 450.
         "lr0.08-tvconst-ramp0.2667-tv6": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667", *tv_weights(6.0)],
         "lr0.08-tvconst-ramp0.15-tv4": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.15", *tv_weights(4.0)],
+        # Session 23: the choice under the two other ReLU rules (dead_start.py): revive every dark batch, TensoRF's.
+        "lr0.08-tvconst-ramp0.2667-tv4-revive1": [
+            "--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667", *tv_weights(4.0), *REVIVE1,
+        ],
+        "lr0.08-tvconst-ramp0.2667-tv4-plain": [
+            "--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667", *tv_weights(4.0), *PLAIN_RELU,
+        ],
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband")

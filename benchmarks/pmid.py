@@ -30,7 +30,9 @@ val-chosen setting's test score is reported. Stages:
 Rows go to ``benchmarks/results/pmid/results.jsonl`` (committed; a recorded run is skipped, so the report is
 regenerated from it alone). ``--device cuda --jobs 4`` runs four trainings at once on one GPU (each with
 ``--threads``; sixteen at once time-slice it to a crawl); the PSNRs do not depend on the device beyond float rounding
-and random streams, the times do (the table names the device).
+and random streams, the times do (the table names the device). GPU runs are not bit-reproducible (grid_sample's CUDA
+backward accumulates with atomics): where a key is run again, its earlier row moves to ``repeats.jsonl`` beside the
+results with a ``repeat`` note, and the report sets both side by side.
 """
 
 from __future__ import annotations
@@ -90,7 +92,7 @@ GRIDS = (
     ),
     Grid(
         "docs/fern_grid_pmid.png",
-        "P-MID runs under the current rule, fourierf-vm `lr0.08-tvconst-ramp0.2667-tv4` and tensorf-vm "
+        "P-MID runs under the rule of session 19, fourierf-vm `lr0.08-tvconst-ramp0.2667-tv4` and tensorf-vm "
         "`lr0.08-tvconst-tv4`, both at constant TV 4 (tensorf-vm's val choice at P-MID adds Floaters-No-More: not "
         "shown)",
         ("fourierf-vm", "tensorf-vm"),
@@ -513,6 +515,50 @@ def rule_along_the_budget(results: dict[str, dict]) -> list[str]:
     return lines
 
 
+REPEATS = "repeats.jsonl"
+"""Beside the results: earlier rows of a key that was run again (the results keep one row a key, the latest), each
+with a ``repeat`` note that says what differed then: the spread between two runs of one setting and seed on a GPU."""
+
+
+def later_seeds_table(results: dict[str, dict], repeats: Sequence[dict]) -> list[str]:
+    """Every setting run on each later seed on a GPU, with its earlier repeats: the ReLU rules and the neighbours of a
+    choice compared where they ran side by side, read against the spread between repeats (GPU training is not
+    bit-reproducible: grid_sample's CUDA backward accumulates with atomics)."""
+    later = SEEDS[1:]
+    groups: dict[tuple[str, str, str, str, str], dict[int, dict]] = {}
+    for r in [*results.values(), *repeats]:
+        if r.get("device") == "cuda" and r["seed"] in later:
+            group = (r["scene"], r["protocol"], r["method"], r["setting"], r.get("repeat", ""))
+            groups.setdefault(group, {})[r["seed"]] = r
+    lines = []
+    for (scene, protocol, method, setting, note), by_seed in sorted(groups.items()):
+        if set(by_seed) != set(later):
+            continue
+        rows = [by_seed[seed] for seed in later]
+        cells = " | ".join(f"{r['val_psnr']:.2f} / {r['psnr']:.2f}" for r in rows)
+        val, test = (np.mean([r[k] for r in rows]) for k in ("val_psnr", "psnr"))
+        lines.append(
+            f"| {scene} | {PROTOCOLS[protocol].name} | {method} | `{setting}`{f' ({note})' if note else ''} | {cells} "
+            f"| {val:.2f} / {test:.2f} |"
+        )
+    if not lines:
+        return []
+    seeds = " | ".join(f"seed {seed}: val / test" for seed in later)
+    return [
+        f"Settings run on seeds {', '.join(map(str, later))} on a GPU (an H100; runs of one session at once), beside "
+        "their earlier repeats: `-plain` is TensoRF's ReLU for the density, `-revive1` revives every dark batch (the "
+        "budget rule's for a forward-facing run over 800 iterations), no suffix the field's default, which revives "
+        "a field only when it is dead (`dead_start.py`). GPU training is not bit-reproducible "
+        "(grid_sample's CUDA backward accumulates with atomics), so a repeat of one setting and seed is the spread "
+        "a difference must clear.",
+        "",
+        f"| scene | protocol | method | setting | {seeds} | mean val / test |",
+        "|---|---|---|---|" + "---|" * len(later) + "---|",
+        *lines,
+        "",
+    ]
+
+
 def report(args: argparse.Namespace) -> list[str]:
     results = load_results(args.results)
     body = section_head(
@@ -562,6 +608,7 @@ def report(args: argparse.Namespace) -> list[str]:
     body += equal_time_lines(results)
     body += rule_along_the_budget(results)
     body += ["", *curve_table(results)]
+    body += later_seeds_table(results, list(load_results(args.results.with_name(REPEATS)).values()))
     body += [
         f"Validation PSNR of every setting tried, seed {SEEDS[0]}, and the mean over all {len(SEEDS)} seeds where "
         "they were run (the choice above is the best mean of each column, else its best first seed):",

@@ -197,3 +197,27 @@ def test_seeds_of_named_settings_skip_what_tensorf_cannot_vary(pmid: ModuleType,
     assert plan == [("fourierf-vm", "pcpu-wd0-ramp0.5", seed) for seed in pmid.SEEDS[1:]]
     args.seeds = [pmid.SEEDS[2]]  # one of the later seeds, when a run is long
     assert [r.seed for _, r in pmid.seeds_plan(args)] == [pmid.SEEDS[2]]
+
+
+def test_the_later_seeds_table_holds_gpu_settings_run_on_every_later_seed_beside_their_repeats(
+    pmid: ModuleType,
+) -> None:
+    one, two = pmid.SEEDS[1:]
+    gpu = {"device": "cuda"}
+    rows = [
+        _row("tv4", one, val=21.0, test=20.0) | gpu,
+        _row("tv4", two, val=22.0, test=21.0) | gpu,
+        _row("tv6", one, val=20.0, test=19.0) | gpu,  # seed 2 missing: no line
+        _row("tv8", one, val=20.0, test=19.0) | {"device": "cpu"},  # a CPU run: not a GPU side by side
+        _row("tv8", two, val=20.0, test=19.0) | {"device": "cpu"},
+    ]
+    repeats = [
+        r | {"val_psnr": r["val_psnr"] + 0.5, "repeat": "an older tree"} for r in rows[:2]
+    ]  # the same keys, run before
+    table = pmid.later_seeds_table({r["key"]: r for r in rows}, repeats)
+    lines = [line for line in table if line.startswith("| lego")]
+    assert lines == [
+        "| lego | P-CPU | fourierf-vm | `tv4` | 21.00 / 20.00 | 22.00 / 21.00 | 21.50 / 20.50 |",
+        "| lego | P-CPU | fourierf-vm | `tv4` (an older tree) | 21.50 / 20.00 | 22.50 / 21.00 | 22.00 / 20.50 |",
+    ]
+    assert pmid.later_seeds_table({r["key"]: r for r in rows[2:]}, []) == []

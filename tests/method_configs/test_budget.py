@@ -12,6 +12,7 @@ from fourierf_plugin.method_configs.budget import (
     OBJECT_TV_WEIGHT,
     PAPER_ITERATIONS,
     REAL_RAMP_ITERATIONS,
+    REAL_REVIVE_AT_ONCE_ABOVE,
     REAL_TV_WEIGHT,
     SHORT_RUN_SETTINGS,
     short_run_settings,
@@ -47,6 +48,11 @@ def test_rule_is_a_function_of_the_iteration_count() -> None:
     assert short_run_settings("fourierf-vm", "real", 3000)[ramp] == 0.2667, "the band opens by step 800"
     assert round(0.2667 * 3000) == REAL_RAMP_ITERATIONS
     assert ramp not in short_run_settings("tensorf-vm", "real", 3000), "no band to open"
+    patience = "pipeline.model.field.revive_patience"
+    for method in ("fourierf-vm", "tensorf-vm"):  # a longer forward-facing run revives a dark field at once
+        assert short_run_settings(method, "real", REAL_REVIVE_AT_ONCE_ABOVE + 1)[patience] == 1
+        assert patience not in short_run_settings(method, "real", REAL_REVIVE_AT_ONCE_ABOVE)
+        assert patience not in short_run_settings(method, "synthetic", 3000), "objects: softplus, no ReLU to revive"
     # objects keep the paper's 20 % at any budget
     assert all(ramp not in short_run_settings("fourierf-vm", "synthetic", n) for n in (300, 800, 3000))
     assert short_run_settings("zerorf-vm", "real", 800) == {}
@@ -118,3 +124,17 @@ def test_a_longer_forward_facing_run_opens_the_band_by_step_800(llff_scene: Path
     assert any("kept your pipeline.model.fourier.ramp_fraction" in n for n in notes)
     short, _ = finished("fourierf-vm", llff_scene, "--max-num-iterations", str(REAL_RAMP_ITERATIONS))
     assert short.pipeline.model.fourier.ramp_fraction == 1.0, "a short run keeps the whole-run ramp that won at 800"
+
+
+def test_a_longer_forward_facing_run_revives_a_dark_density_field_at_once(llff_scene: Path) -> None:
+    config, notes = finished("fourierf-vm", llff_scene, "--max-num-iterations", "3000")
+    assert config.pipeline.model.field.revive_patience == 1
+    assert any(n.startswith("budget rule") and "revive_patience=1" in n for n in notes)
+    short, _ = finished("fourierf-vm", llff_scene, "--max-num-iterations", str(REAL_REVIVE_AT_ONCE_ABOVE))
+    assert short.pipeline.model.field.revive_patience == 16, "at 800 iterations waiting for a fresh field won"
+    mine, _ = finished(
+        "fourierf-vm", llff_scene, "--max-num-iterations", "3000", "--pipeline.model.field.revive-patience", "4"
+    )
+    assert mine.pipeline.model.field.revive_patience == 4, "a flag wins"
+    paper, _ = finished("fourierf-vm", llff_scene, "--max-num-iterations", str(PAPER_ITERATIONS))
+    assert paper.pipeline.model.field.revive_patience == 16

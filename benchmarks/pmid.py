@@ -488,14 +488,18 @@ def equal_time_lines(results: dict[str, dict]) -> list[str]:
 
 
 RULE_ALONG_THE_BUDGET = {
-    "fourierf-vm": (("pcpu", "lr0.08-tvconst-tv4"), ("pcpu3000", "lr0.08-tvconst-ramp0.2667-tv4")),
+    "fourierf-vm": (("pcpu", "lr0.08-tvconst-tv4"), ("pcpu3000", "lr0.08-tvconst-ramp0.2667-tv4-revive1")),
     "tensorf-vm": (("pcpu", "lr0.08-tvconst-tv4"), ("pcpu3000", "lr0.08-tvconst-tv4")),
 }
 """fern, each method: the budget rule's settings at 800 and at 3000 iterations of P-CPU's sizes (grid lr 0.08, constant
-TV 4; fourierf-vm's band opens over the whole 800-iteration run and over the first 800 of the 3000)."""
+TV 4; fourierf-vm's band opens over the whole 800-iteration run and over the first 800 of the 3000, and the longer run
+revives a dark density field at its first dark batch)."""
 
 
-RULE_AT_800 = {(method, long): short for method, ((_, short), (_, long)) in RULE_ALONG_THE_BUDGET.items()}
+RULE_AT_800 = {
+    **{(method, long): short for method, ((_, short), (_, long)) in RULE_ALONG_THE_BUDGET.items()},
+    ("fourierf-vm", "lr0.08-tvconst-ramp0.2667-tv4"): "lr0.08-tvconst-tv4",  # session 19's rule, its curve run
+}
 """(method, the rule's 3000-iteration setting) -> the rule's 800-iteration setting, where the two are named apart."""
 
 

@@ -79,8 +79,9 @@ REAL_REVIVE_AT_ONCE_ABOVE = 800
 At 800 iterations waiting won (``benchmarks/dead_start.py``, 64³: +0.27 dB val a seed over TensoRF's ReLU against
 +0.22 reviving at once; fern P-CPU seed 20211202 20.24 against 19.82); at 3000 (P-MID, 96³ -> 192³, 2048 rays) reviving
 at once won on each of three seeds (val, wait -> at once: seed 20211202, CPU, 21.36 -> 21.66; seeds 1 and 2, H100,
-21.18 / 20.99 -> 21.41 / 21.33, with TensoRF's ReLU 21.32 / 21.24 and an earlier H100 run at once 21.63 / 21.47).
-Measured at those two budgets only: the boundary is the one the band uses (``REAL_RAMP_ITERATIONS``)."""
+21.18 / 20.99 -> 21.41 / 21.33, with TensoRF's ReLU 21.32 / 21.24 and an earlier H100 run at once 21.63 / 21.47), and
+at 3000 on P-CPU's 64³ -> 128³ (seed 20211202: 20.94 -> 21.19). Measured at those two budgets only: the boundary is the
+one the band uses (``REAL_RAMP_ITERATIONS``)."""
 
 
 def ramp_fraction(scene_preset: str, iterations: int) -> float | None:

@@ -160,6 +160,11 @@ def tv_weights(weight: float) -> list[str]:
     return ["--pipeline.model.tv-weight-density", str(weight), "--pipeline.model.tv-weight-appearance", str(weight)]
 
 
+FERN_PMID_RULE = ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667", *tv_weights(4.0)]
+"""Session 19's forward-facing rule at 3000 iterations (the band open by step 800, constant TV 4), which P-MID's fern
+settings of sessions 19 and 23 vary."""
+
+
 def depth_smoothness(weight: float) -> list[str]:
     """RegNeRF's depth smoothness at ``weight`` on the default unseen-view patches (4 of 8×8 pixels a step)."""
     return ["--pipeline.model.depth-smoothness-weight", str(weight)]
@@ -247,13 +252,11 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-tvconst-tv4": ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(4.0)],
         # Session 17: the forward-facing rule at 3000 iterations (band open by step 800: 800 / 3000).
         "lr0.08-tvconst-ramp0.2667": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667"],
-        "lr0.08-tvconst-ramp0.2667-tv4": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667", *tv_weights(4.0)],
+        "lr0.08-tvconst-ramp0.2667-tv4": FERN_PMID_RULE,
         # Session 18: Floaters-No-More (tensorf-vm's val choice at 800 iterations, TV 1) on top of TV 4.
         "lr0.08-tvconst-tv4-fnm": ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(4.0), *FNM],
         # Session 19: the same for fourierf-vm at 3000 iterations, with the rule's ramp (band open by step 800).
-        "lr0.08-tvconst-ramp0.2667-tv4-fnm": [
-            "--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667", *tv_weights(4.0), *FNM,
-        ],
+        "lr0.08-tvconst-ramp0.2667-tv4-fnm": [*FERN_PMID_RULE, *FNM],
         # Session 20: RegNeRF's depth smoothness on 8×8 patches from poses between the training cameras, on the rule.
         **{
             f"lr0.08-tvconst-tv4-ds{weight}": [
@@ -265,12 +268,8 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-tvconst-ramp0.2667-tv6": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667", *tv_weights(6.0)],
         "lr0.08-tvconst-ramp0.15-tv4": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.15", *tv_weights(4.0)],
         # Session 23: the choice under the two other ReLU rules (dead_start.py): revive every dark batch, TensoRF's.
-        "lr0.08-tvconst-ramp0.2667-tv4-revive1": [
-            "--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667", *tv_weights(4.0), *REVIVE1,
-        ],
-        "lr0.08-tvconst-ramp0.2667-tv4-plain": [
-            "--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667", *tv_weights(4.0), *PLAIN_RELU,
-        ],
+        "lr0.08-tvconst-ramp0.2667-tv4-revive1": [*FERN_PMID_RULE, *REVIVE1],
+        "lr0.08-tvconst-ramp0.2667-tv4-plain": [*FERN_PMID_RULE, *PLAIN_RELU],
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband")

@@ -73,7 +73,7 @@ Objects keep the paper's 20 % at any budget: with the object rule's TV it beat h
 22.71 against 22.52 at TV 2), and at 3000 it beat half the run at TV 1 (21.97 against 21.63)."""
 
 
-REAL_REVIVE_AT_ONCE_ABOVE = 800
+REAL_REVIVE_AT_ONCE_ABOVE = REAL_RAMP_ITERATIONS
 """Forward-facing scenes, both methods: a run longer than this revives a dark density field at its first dark batch
 (``revive_patience`` 1) instead of waiting 16 batches for a fresh field to come back by itself (the ReLU's default).
 At 800 iterations waiting won (``benchmarks/dead_start.py``, 64³: +0.27 dB val a seed over TensoRF's ReLU against
@@ -82,6 +82,11 @@ at once won on each of three seeds (val, wait -> at once: seed 20211202, CPU, 21
 21.18 / 20.99 -> 21.41 / 21.33, with TensoRF's ReLU 21.32 / 21.24 and an earlier H100 run at once 21.63 / 21.47), and
 at 3000 on P-CPU's 64³ -> 128³ (seed 20211202: 20.94 -> 21.19). Measured at those two budgets only: the boundary is the
 one the band uses (``REAL_RAMP_ITERATIONS``)."""
+
+
+def revive_patience(scene_preset: str, iterations: int) -> int | None:
+    """The rule's ``revive_patience`` (None: the field's default): a longer forward-facing run revives at once."""
+    return 1 if scene_preset == "real" and iterations > REAL_REVIVE_AT_ONCE_ABOVE else None
 
 
 def ramp_fraction(scene_preset: str, iterations: int) -> float | None:
@@ -100,8 +105,9 @@ def short_run_settings(method: str, scene_preset: str, iterations: int) -> dict[
     ramp = ramp_fraction(scene_preset, iterations) if method == "fourierf-vm" else None
     if ramp is not None:
         settings["pipeline.model.fourier.ramp_fraction"] = ramp
-    if settings and scene_preset == "real" and iterations > REAL_REVIVE_AT_ONCE_ABOVE:
-        settings["pipeline.model.field.revive_patience"] = 1
+    patience = revive_patience(scene_preset, iterations) if (method, scene_preset) in SHORT_RUN_SETTINGS else None
+    if patience is not None:
+        settings["pipeline.model.field.revive_patience"] = patience
     return settings
 
 

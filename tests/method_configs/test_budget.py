@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig
 from fourierf_plugin.method_configs import all_methods, finalize
 from fourierf_plugin.method_configs.budget import (
     OBJECT_TV_WEIGHT,
@@ -131,10 +132,12 @@ def test_a_longer_forward_facing_run_revives_a_dark_density_field_at_once(llff_s
     assert config.pipeline.model.field.revive_patience == 1
     assert any(n.startswith("budget rule") and "revive_patience=1" in n for n in notes)
     short, _ = finished("fourierf-vm", llff_scene, "--max-num-iterations", str(REAL_REVIVE_AT_ONCE_ABOVE))
-    assert short.pipeline.model.field.revive_patience == 16, "at 800 iterations waiting for a fresh field won"
+    field_default = FieldConfig().revive_patience
+    assert field_default > 1, "the field's default waits for a fresh field"
+    assert short.pipeline.model.field.revive_patience == field_default, "at 800 iterations waiting won"
     mine, _ = finished(
         "fourierf-vm", llff_scene, "--max-num-iterations", "3000", "--pipeline.model.field.revive-patience", "4"
     )
     assert mine.pipeline.model.field.revive_patience == 4, "a flag wins"
     paper, _ = finished("fourierf-vm", llff_scene, "--max-num-iterations", str(PAPER_ITERATIONS))
-    assert paper.pipeline.model.field.revive_patience == 16
+    assert paper.pipeline.model.field.revive_patience == field_default

@@ -11,6 +11,7 @@ table.
 | P-CPU | 800 | 1024 | 64³ → 128³ | 100×100 | 504×378 (images_8) |
 | P-MID | 3000 | 2048 | 96³ → 192³ | 200×200 | 504×378 (images_8) |
 | P-CPU sizes, 3000 it. (curve) | 3000 | 1024 | 64³ → 128³ | 100×100 | 504×378 (images_8) |
+| P-CPU sizes, 1500 it. (the rule between) | 1500 | 1024 | 64³ → 128³ | 100×100 | 504×378 (images_8) |
 
 P-MID's final grid is what the CPU run sizing picks for these images (1.28 voxels per pixel of the larger side, capped
 at 192). TensoRF's LLFF configuration grows to 640³ over 25k iterations at 1/4 resolution and the paper's Blender
@@ -134,6 +135,8 @@ PROTOCOLS = {  # name, iterations, rays per batch, initial and final grid side, 
     "pcpu1040": Protocol("P-CPU, 1040 it.", 1040, 1024, 64, 128, 4),
     # P-CPU's sizes at P-MID's 3000 iterations, for the curve along training (the ``curve`` stage only).
     "pcpu3000": Protocol("P-CPU sizes, 3000 it.", 3000, 1024, 64, 128, 4),
+    # Between the two: where the budget rule's revival at once (over 800 iterations) starts to pay.
+    "pcpu1500": Protocol("P-CPU sizes, 1500 it.", 1500, 1024, 64, 128, 4),
 }
 CURVE_BASE = {"pcpu3000": "pcpu", "pmid": "pmid800"}
 """A curve's protocol and the 800-iteration protocol of the same sizes, whose val-chosen setting the curve trains."""
@@ -149,6 +152,7 @@ F_FINAL = "--pipeline.model.fourier.f-final"
 F_FINAL_COLOR = "--pipeline.model.fourier.f-final-color"
 F0_DENSITY, F0_COLOR = "--pipeline.model.fourier.f0-density", "--pipeline.model.fourier.f0-color"
 FNM = ["--pipeline.model.floaters-gradient-scaling", "True"]
+FNM_FROM = "--pipeline.model.floaters-gradient-scaling-from"
 IN_BAND = ["--pipeline.model.fourier.init-in-band", "True"]
 RULE_LEGO = [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.04"]
 REVIVE1 = ["--pipeline.model.field.revive-patience", "1"]
@@ -270,6 +274,33 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # Session 23: the choice under the two other ReLU rules (dead_start.py): revive every dark batch, TensoRF's.
         "lr0.08-tvconst-ramp0.2667-tv4-revive1": [*FERN_PMID_RULE, *REVIVE1],
         "lr0.08-tvconst-ramp0.2667-tv4-plain": [*FERN_PMID_RULE, *PLAIN_RELU],
+        # Session 24: Floaters-No-More once the band is open (step 800), when the field trains like TensoRF's, which it
+        # helps; against the whole run.
+        "lr0.08-tvconst-ramp0.2667-tv4-revive1-fnm": [*FERN_PMID_RULE, *REVIVE1, *FNM],
+        "lr0.08-tvconst-ramp0.2667-tv4-revive1-fnmlate": [*FERN_PMID_RULE, *REVIVE1, *FNM, FNM_FROM, "0.2667"],
+        # Session 24: a band that stops short of the whole spectrum, so the field cannot drift to TensoRF's solution
+        # over the 2200 iterations after the ramp: both grids at 0.85, or the geometry alone at 0.7.
+        "lr0.08-tvconst-ramp0.2667-tv4-revive1-ffinal0.85": [*FERN_PMID_RULE, *REVIVE1, F_FINAL, "0.85"],
+        "lr0.08-tvconst-ramp0.2667-tv4-revive1-ffinald0.7": [
+            *FERN_PMID_RULE, *REVIVE1, F_FINAL, "0.7", F_FINAL_COLOR, "1.0",
+        ],
+        # Session 24: a wider first band (the real preset's f0 is 0.01: little more than the mean), and half the grid lr
+        # for the longer run.
+        "lr0.08-tvconst-ramp0.2667-tv4-revive1-f0.05": [
+            *FERN_PMID_RULE, *REVIVE1, F0_DENSITY, "0.05", F0_COLOR, "0.05",
+        ],
+        "lr0.04-tvconst-ramp0.2667-tv4-revive1": ["--optimizer.lr-grids", "0.04", *FERN_PMID_RULE[2:], *REVIVE1],
+        # Session 24: the budget rule at 1500 iterations (band open by step 800), waiting for a fresh field or reviving
+        # at once, for both methods.
+        "lr0.08-tvconst-ramp0.5333-tv4": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.5333", *tv_weights(4.0)],
+        "lr0.08-tvconst-ramp0.5333-tv4-revive1": [
+            "--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.5333", *tv_weights(4.0), *REVIVE1,
+        ],
+        "lr0.08-tvconst-tv4-revive1": ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(4.0), *REVIVE1],
+        # ... and at 3000 iterations the band open by step 1500 instead of 800.
+        "lr0.08-tvconst-ramp0.5-tv4-revive1": [
+            "--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.5", *tv_weights(4.0), *REVIVE1,
+        ],
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband")

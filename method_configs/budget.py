@@ -69,6 +69,8 @@ REAL_RAMP_ITERATIONS = 800
 """Forward-facing scenes, FourieRF: the band opens over this many iterations, or over the whole run if it is shorter.
 The real-scene preset opens it over the whole run, which at 800 iterations won on val; at 3000 the band was open only
 at the last step and opening it by step 800 won (fern val 20.04 -> 21.22 at 64³ -> 128³, 19.97 -> 21.06 at 192³).
+At 1500 (64³ -> 128³, 3 seeds, with the revival below) it held by less than a seed's spread: 20.25 against 20.17 for
+the whole run; at 3000 opening by step 1500 read 21.41 against the rule's 21.19 (one seed): not enough to move it.
 Objects keep the paper's 20 % at any budget: with the object rule's TV it beat half of an 800-iteration run (lego val
 22.71 against 22.52 at TV 2), and at 3000 it beat half the run at TV 1 (21.97 against 21.63)."""
 
@@ -80,8 +82,9 @@ At 800 iterations waiting won (``benchmarks/dead_start.py``, 64³: +0.27 dB val 
 +0.22 reviving at once; fern P-CPU seed 20211202 20.24 against 19.82); at 3000 (P-MID, 96³ -> 192³, 2048 rays) reviving
 at once won on each of three seeds (val, wait -> at once: seed 20211202, CPU, 21.36 -> 21.66; seeds 1 and 2, H100,
 21.18 / 20.99 -> 21.41 / 21.33, with TensoRF's ReLU 21.32 / 21.24 and an earlier H100 run at once 21.63 / 21.47), and
-at 3000 on P-CPU's 64³ -> 128³ (seed 20211202: 20.94 -> 21.19). Measured at those two budgets only: the boundary is the
-one the band uses (``REAL_RAMP_ITERATIONS``)."""
+at 3000 on P-CPU's 64³ -> 128³ (seed 20211202: 20.94 -> 21.19), and at 1500 there (19.92 -> 20.36, with the band
+open by step 800; with the band over the whole run waiting won, 20.74 against 20.40). The boundary is the one the band
+uses (``REAL_RAMP_ITERATIONS``): reviving at once pays where the band opens early."""
 
 
 def revive_patience(scene_preset: str, iterations: int) -> int | None:

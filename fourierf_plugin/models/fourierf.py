@@ -135,6 +135,8 @@ class FourieRFModel(nn.Module):
         self.upsample_steps = schedules.steps_from_fractions(fc.upsample_fractions, max_iters)
         self.voxel_targets = schedules.voxel_counts(fc.n_voxels_init, fc.n_voxels_final, len(self.upsample_steps))
         self.occupancy_steps = schedules.steps_from_fractions(config.occupancy_update_fractions, max_iters)
+        self.floaters_from_step = round(config.floaters_gradient_scaling_from * max_iters)
+        self._floaters_now = config.floaters_gradient_scaling and self.floaters_from_step == 0
         self.field = self._build_field(scene_box, effects, generator, device)
         if config.fourier.enabled and config.fourier.init_in_band and isinstance(self.field, FourierTensoRFField):
             self.field.keep_band(*self.cutoffs(0))
@@ -186,6 +188,10 @@ class FourieRFModel(nn.Module):
         ratio = self.config.tv_decay_ratio
         return 1.0 if ratio is None else schedules.tv_weight_at(step, 1.0, ratio, self.max_iters)
 
+    def floaters_scaling_at(self, step: int) -> bool:
+        """Whether Floaters-No-More scales this step's gradients (from ``floaters_gradient_scaling_from`` on)."""
+        return self.config.floaters_gradient_scaling and step >= self.floaters_from_step
+
     def l1_weight(self, step: int) -> float:
         # The switch happens after the first update's own step, i.e. from the next step on.
         first = self.occupancy_steps[0] + 1 if self.occupancy_steps else None
@@ -217,6 +223,7 @@ class FourieRFModel(nn.Module):
         """Filter the grids at this step's cutoffs once; call before ``forward`` (under no_grad for renders)."""
         with phase("fourier_filter"):
             self.field.prepare(*self.cutoffs(step))
+        self._floaters_now = self.floaters_scaling_at(step)
 
     def forward(
         self,
@@ -238,7 +245,7 @@ class FourieRFModel(nn.Module):
             samples = self.sample(origins, directions, jitter)
         with phase("density"):
             sigma = self.march(samples)
-        scale = floaters_scale(samples.t) if self.training and self.config.floaters_gradient_scaling else None
+        scale = floaters_scale(samples.t) if self.training and self._floaters_now else None
         if scale is not None:
             sigma = scale_gradient(sigma, scale)
         with phase("compositing"):
@@ -472,6 +479,10 @@ class FourieRFModelConfig(InstantiateConfig):
     """Share of each ray, from its start, whose densities the occlusion term penalises (FreeNeRF: 20 of 128)."""
     floaters_gradient_scaling: bool = False
     """'Floaters No More': scale density and colour gradients by clamp(t², 0, 1) (t: the ray parameter)."""
+    floaters_gradient_scaling_from: float = 0.0
+    """Fraction of the run from which Floaters-No-More scales gradients (0: the whole run, as in its paper). While
+    the band is narrow FourieRF paints no near floaters and the scaling only slows the near geometry; once the band
+    is open the field trains like TensoRF's, which the scaling helps (set it to the ramp fraction for that)."""
     depth_smoothness_weight: float = 0.0
     """RegNeRF's depth smoothness on patches seen from poses between the training cameras (RegNeRF: 0.1 on NDC depth,
     8×8 patches); 0 = off, and no extra rays are rendered."""

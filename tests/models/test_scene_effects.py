@@ -255,24 +255,28 @@ def test_floaters_scale_is_clamped_t_squared() -> None:
     torch.testing.assert_close(floaters_scale(t), torch.tensor([0.0, 0.25, 1.0, 1.0, 1.0]))
 
 
-def floaters_model(floaters: bool) -> FourieRFModel:
+def floaters_model(floaters: bool, start: float = 0.0) -> FourieRFModel:
     # density_shift 0 gives softplus(raw) ~ 0.7: enough weight on every sample that colours are shaded too
     cfg = FourieRFModelConfig(
         field=FieldConfig(n_voxels_init=4096, n_voxels_final=13824, density_shift=0.0),
         floaters_gradient_scaling=floaters,
+        floaters_gradient_scaling_from=start,
     )
     torch.manual_seed(0)  # the decoder's layers draw from the global RNG
     return ndc_model(cfg)
 
 
-def grads(floaters: bool, training: bool) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
-    """Parameter gradients of an MSE on 128 NDC rays (same rays, same jitter with and without scaling)."""
-    model = floaters_model(floaters)
+def grads(
+    floaters: bool, training: bool, start: float = 0.0, step: int = 0
+) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+    """Parameter gradients of an MSE on 128 NDC rays at ``step`` (same rays, same jitter with and without
+    scaling)."""
+    model = floaters_model(floaters, start)
     g = torch.Generator().manual_seed(1)
     origins = torch.cat([(torch.rand(128, 2, generator=g) - 0.5) * 2, -torch.ones(128, 1)], dim=-1)
     directions = torch.cat([(torch.rand(128, 2, generator=g) - 0.5) * 0.2, torch.full((128, 1), 2.0)], dim=-1)
     target = torch.rand(128, 3, generator=g)
-    model.prepare(0)
+    model.prepare(step)
     out = model.train(training)(origins, directions)
     ((out["rgb"] - target) ** 2).mean().backward()
     found = {name: p.grad.detach().clone() for name, p in model.named_parameters() if p.grad is not None}
@@ -306,3 +310,18 @@ def test_floaters_scaling_is_off_by_default_and_at_eval() -> None:
     assert plain.keys() == scaled.keys() and plain
     for name, grad in plain.items():
         assert torch.equal(scaled[name], grad), name
+
+
+def test_floaters_scaling_starts_at_its_fraction_of_the_run() -> None:
+    """With the scaling from half the run: before that step the gradients are the plain ones to the bit, from it on
+    they are the scaled ones (the same as scaling the whole run)."""
+    model = floaters_model(True, start=0.5)
+    half = model.floaters_from_step
+    assert half == round(0.5 * model.max_iters) > 0
+    assert [model.floaters_scaling_at(s) for s in (0, half - 1, half, model.max_iters)] == [False, False, True, True]
+    for step, reference in ((half - 1, False), (half, True)):
+        late, _ = grads(True, training=True, start=0.5, step=step)
+        same, _ = grads(reference, training=True, step=step)
+        assert late.keys() == same.keys() and late
+        for name, grad in same.items():
+            assert torch.equal(late[name], grad), (step, name)

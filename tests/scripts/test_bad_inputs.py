@@ -314,6 +314,9 @@ CASES: dict[str, Case] = {
     ),
     "train: negative depth-smoothness weight": out_of_range(f"{MODEL}.depth-smoothness-weight", "-1", ">= 0"),
     "train: zero depth-smoothness patches": out_of_range(f"{MODEL}.depth-smoothness-patches", "0", ">= 1"),
+    "train: floaters scaling from past the run": out_of_range(
+        f"{MODEL}.floaters-gradient-scaling-from", "1.5", "[0, 1]"
+    ),
     "train: a depth-smoothness patch of one pixel": out_of_range(f"{MODEL}.depth-smoothness-patch-size", "1", ">= 2"),
     "train: a depth-smoothness patch larger than the images": Case(
         "train",

@@ -164,9 +164,14 @@ def tv_weights(weight: float) -> list[str]:
     return ["--pipeline.model.tv-weight-density", str(weight), "--pipeline.model.tv-weight-appearance", str(weight)]
 
 
-FERN_PMID_RULE = ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667", *tv_weights(4.0)]
+def fern_rule(ramp: str, tv: float = 4.0, lr: str = "0.08") -> list[str]:
+    """The forward-facing rule's flags with the band open by ``ramp`` of the run: grid lr, constant TV at ``tv``."""
+    return ["--optimizer.lr-grids", lr, *TV_CONST, RAMP, ramp, *tv_weights(tv)]
+
+
+FERN_PMID_RULE = fern_rule("0.2667")
 """Session 19's forward-facing rule at 3000 iterations (the band open by step 800, constant TV 4), which P-MID's fern
-settings of sessions 19 and 23 vary."""
+settings of sessions 19, 23 and 24 vary."""
 
 
 def depth_smoothness(weight: float) -> list[str]:
@@ -269,8 +274,8 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
             for weight in (0.1, 1, 10)
         },
         # Session 23: around the P-MID choice on seeds 1 and 2 (one GPU call): a stronger TV, a band open by step 450.
-        "lr0.08-tvconst-ramp0.2667-tv6": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667", *tv_weights(6.0)],
-        "lr0.08-tvconst-ramp0.15-tv4": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.15", *tv_weights(4.0)],
+        "lr0.08-tvconst-ramp0.2667-tv6": fern_rule("0.2667", tv=6.0),
+        "lr0.08-tvconst-ramp0.15-tv4": fern_rule("0.15"),
         # Session 23: the choice under the two other ReLU rules (dead_start.py): revive every dark batch, TensoRF's.
         "lr0.08-tvconst-ramp0.2667-tv4-revive1": [*FERN_PMID_RULE, *REVIVE1],
         "lr0.08-tvconst-ramp0.2667-tv4-plain": [*FERN_PMID_RULE, *PLAIN_RELU],
@@ -289,18 +294,14 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-tvconst-ramp0.2667-tv4-revive1-f0.05": [
             *FERN_PMID_RULE, *REVIVE1, F0_DENSITY, "0.05", F0_COLOR, "0.05",
         ],
-        "lr0.04-tvconst-ramp0.2667-tv4-revive1": ["--optimizer.lr-grids", "0.04", *FERN_PMID_RULE[2:], *REVIVE1],
+        "lr0.04-tvconst-ramp0.2667-tv4-revive1": [*fern_rule("0.2667", lr="0.04"), *REVIVE1],
         # Session 24: the budget rule at 1500 iterations (band open by step 800), waiting for a fresh field or reviving
         # at once, for both methods.
-        "lr0.08-tvconst-ramp0.5333-tv4": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.5333", *tv_weights(4.0)],
-        "lr0.08-tvconst-ramp0.5333-tv4-revive1": [
-            "--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.5333", *tv_weights(4.0), *REVIVE1,
-        ],
+        "lr0.08-tvconst-ramp0.5333-tv4": fern_rule("0.5333"),
+        "lr0.08-tvconst-ramp0.5333-tv4-revive1": [*fern_rule("0.5333"), *REVIVE1],
         "lr0.08-tvconst-tv4-revive1": ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(4.0), *REVIVE1],
         # ... and at 3000 iterations the band open by step 1500 instead of 800.
-        "lr0.08-tvconst-ramp0.5-tv4-revive1": [
-            "--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.5", *tv_weights(4.0), *REVIVE1,
-        ],
+        "lr0.08-tvconst-ramp0.5-tv4-revive1": [*fern_rule("0.5"), *REVIVE1],
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband")

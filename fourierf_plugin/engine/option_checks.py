@@ -187,6 +187,18 @@ def check_init_in_band(fourier: Any) -> None:
         )
 
 
+def check_floaters_start(model: Any) -> None:
+    """A start for a gradient scaling that is off would be ignored: refuse it, as a band option without a band."""
+    start = model.floaters_gradient_scaling_from
+    if start > 0 and not model.floaters_gradient_scaling:
+        flag = flag_of(f"{_MODEL}.floaters_gradient_scaling_from")
+        on = flag_of(f"{_MODEL}.floaters_gradient_scaling")
+        fail(
+            f"{flag} {start} starts Floaters-No-More gradient scaling, which is off in this run: nothing to start",
+            f"add {on} True, or drop {flag}",
+        )
+
+
 EVENT_SCHEDULES = (f"{_MODEL}.field.upsample_fractions", f"{_MODEL}.occupancy_update_fractions")
 """Events placed at fractions of the run: each must land on a step inside it."""
 
@@ -201,6 +213,7 @@ def check_training_options(config: Any) -> None:
     check_zerorf_options(config)
     check_final_cutoff(config.pipeline.model.fourier)
     check_init_in_band(config.pipeline.model.fourier)
+    check_floaters_start(config.pipeline.model)
     iters = config.max_num_iterations
     if not (_integer(iters) and iters >= 1):
         fail(f"--max-num-iterations must be at least 1, got {iters}", "pass a positive number")

@@ -136,7 +136,7 @@ class FourieRFModel(nn.Module):
         self.voxel_targets = schedules.voxel_counts(fc.n_voxels_init, fc.n_voxels_final, len(self.upsample_steps))
         self.occupancy_steps = schedules.steps_from_fractions(config.occupancy_update_fractions, max_iters)
         self.floaters_from_step = round(config.floaters_gradient_scaling_from * max_iters)
-        self._floaters_now = config.floaters_gradient_scaling and self.floaters_from_step == 0
+        self._floaters_now = self.floaters_scaling_at(0)  # ``prepare`` sets it for each step
         self.field = self._build_field(scene_box, effects, generator, device)
         if config.fourier.enabled and config.fourier.init_in_band and isinstance(self.field, FourierTensoRFField):
             self.field.keep_band(*self.cutoffs(0))

@@ -317,6 +317,11 @@ CASES: dict[str, Case] = {
     "train: floaters scaling from past the run": out_of_range(
         f"{MODEL}.floaters-gradient-scaling-from", "1.5", "[0, 1]"
     ),
+    "train: a start for floaters scaling that is off": Case(
+        "train",
+        train_with(f"{MODEL}.floaters-gradient-scaling-from", "0.5"),
+        ("floaters-gradient-scaling-from 0.5", "off", "floaters-gradient-scaling True"),
+    ),
     "train: a depth-smoothness patch of one pixel": out_of_range(f"{MODEL}.depth-smoothness-patch-size", "1", ">= 2"),
     "train: a depth-smoothness patch larger than the images": Case(
         "train",

@@ -235,6 +235,17 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "wd0-nodecay-lr0.04-tv2-inband": [*RULE_LEGO, *tv_weights(2.0), *IN_BAND],
         # Session 20: RegNeRF's depth smoothness on patches from poses between the four cameras, on the rule.
         "wd0-nodecay-lr0.04-tv4-ds1": [*RULE_LEGO, *tv_weights(4.0), *depth_smoothness(1.0)],
+        # Session 25: the curriculum's own levers again, now on the object rule's TV 4 (tried at TV 1 before).
+        "wd0-nodecay-lr0.04-tv4-ramp0.1": [*RULE_LEGO, *tv_weights(4.0), RAMP, "0.1"],
+        "wd0-nodecay-lr0.04-tv4-ramp0.5": [*RULE_LEGO, *tv_weights(4.0), RAMP, "0.5"],
+        "wd0-nodecay-lr0.04-tv4-ffinal0.85": [*RULE_LEGO, *tv_weights(4.0), F_FINAL, "0.85"],
+        "wd0-nodecay-lr0.04-tv4-f0.1": [*RULE_LEGO, *tv_weights(4.0), F0_DENSITY, "0.1", F0_COLOR, "0.1"],
+        "wd0-nodecay-lr0.04-tv4-f0.5": [*RULE_LEGO, *tv_weights(4.0), F0_DENSITY, "0.5", F0_COLOR, "0.5"],
+        "wd0-nodecay-lr0.06-tv4": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.06", *tv_weights(4.0)],
+        "wd0-nodecay-lr0.04-tv4-f0.05": [*RULE_LEGO, *tv_weights(4.0), F0_DENSITY, "0.05", F0_COLOR, "0.05"],
+        "wd0-nodecay-lr0.04-tv4-f0d0.1": [*RULE_LEGO, *tv_weights(4.0), F0_DENSITY, "0.1"],
+        "wd0-nodecay-lr0.04-tv4-f0.1-ffinal0.85": [
+            *RULE_LEGO, *tv_weights(4.0), F0_DENSITY, "0.1", F0_COLOR, "0.1", F_FINAL, "0.85"],
     },
     # Forward-facing scenes: the real-scene preset (the trainer applies it), its grid lr, the occlusion term, f0/Δ,
     # Floaters-No-More gradient scaling.

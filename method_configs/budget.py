@@ -71,7 +71,7 @@ The real-scene preset opens it over the whole run, which at 800 iterations won o
 at the last step and opening it by step 800 won (fern val 20.04 -> 21.22 at 64³ -> 128³, 19.97 -> 21.06 at 192³).
 At 1500 (64³ -> 128³, 3 seeds, with the revival below) it held by less than a seed's spread: 20.25 against 20.17 for
 the whole run; at 3000 opening by step 1500 read 21.41 against the rule's 21.19 on seed 20211202 but 20.65 and 20.70
-on seeds 1 and 2 (where opening by step 750 at TV 1 read 21.07 and 21.44).
+on seeds 1 and 2, where the rule read 20.71 and 21.02 (means 20.92 against 20.97).
 Objects keep the paper's 20 % at any budget: with the object rule's TV it beat half of an 800-iteration run (lego val
 22.71 against 22.52 at TV 2), and at 3000 it beat half the run at TV 1 (21.97 against 21.63)."""
 

@@ -177,12 +177,19 @@ FERN_PMID_RULE = fern_rule("0.2667")
 settings of sessions 19, 23 and 24 vary."""
 
 
+def first_band(f0: str) -> list[str]:
+    """Both grids' first band (``f0`` of the spectrum kept at step 0)."""
+    return [F0_DENSITY, f0, F0_COLOR, f0]
+
+
 def depth_smoothness(weight: float) -> list[str]:
     """RegNeRF's depth smoothness at ``weight`` on the default unseen-view patches (4 of 8×8 pixels a step)."""
     return ["--pipeline.model.depth-smoothness-weight", str(weight)]
 
 
 TV_LOW = tv_weights(0.1)
+LEGO_TV4 = [*RULE_LEGO, *tv_weights(4.0)]
+"""The object rule as it stands since session 16 (TV 4), which the lego settings of sessions 20 and 25 vary."""
 SETTINGS: dict[str, dict[str, list[str]]] = {
     # Object scenes: the synthetic preset and the levers the issue names (weight decay, lr decay, TV, f0/Δ).
     "lego": {
@@ -194,7 +201,7 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "wd0-tvconst": [*WD0, *TV_CONST],
         "wd0-lr0.04": [*WD0, "--optimizer.lr-grids", "0.04"],
         "wd0-ramp0.5": [*WD0, "--pipeline.model.fourier.ramp-fraction", "0.5"],
-        "wd0-f0.1": [*WD0, "--pipeline.model.fourier.f0-density", "0.1", "--pipeline.model.fourier.f0-color", "0.1"],
+        "wd0-f0.1": [*WD0, *first_band("0.1")],
         # Session 12: the levers left, on the val-chosen wd0-nodecay (a longer ramp, a final cutoff below 1, the
         # occlusion term on an object).
         "wd0-nodecay-ramp0.5": [*WD0, *NO_DECAY, RAMP, "0.5"],
@@ -206,7 +213,7 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # Session 14: the grid learning rate, a wider first band, lighter TV, on the rule's optimiser.
         "wd0-nodecay-lr0.04": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.04"],
         "wd0-nodecay-lr0.01": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.01"],
-        "wd0-nodecay-f0.5": [*WD0, *NO_DECAY, F0_DENSITY, "0.5", F0_COLOR, "0.5"],
+        "wd0-nodecay-f0.5": [*WD0, *NO_DECAY, *first_band("0.5")],
         "wd0-nodecay-tv0.1": [*WD0, *NO_DECAY, *TV_LOW],
         "wd0-nodecay-lr0.04-ramp0.5": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.04", RAMP, "0.5"],
         # Session 15: the curriculum's own levers on the rule's settings (density and colour bands apart, a longer
@@ -229,7 +236,7 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "wd0-nodecay-lr0.04-tv0.5": [*RULE_LEGO, *tv_weights(0.5)],
         "wd0-nodecay-lr0.04-ramp0.5-tv0.5": [*RULE_LEGO, RAMP, "0.5", *tv_weights(0.5)],
         "wd0-nodecay-lr0.04-tv3": [*RULE_LEGO, *tv_weights(3.0)],
-        "wd0-nodecay-lr0.04-tv4": [*RULE_LEGO, *tv_weights(4.0)],
+        "wd0-nodecay-lr0.04-tv4": LEGO_TV4,
         "wd0-nodecay-lr0.04-tv6": [*RULE_LEGO, *tv_weights(6.0)],
         "wd0-nodecay-lr0.04-tv8": [*RULE_LEGO, *tv_weights(8.0)],
         # The raw factors start inside the f0 band (no initial noise waiting outside it).
@@ -237,18 +244,18 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "wd0-nodecay-lr0.04-ramp0.5-inband": [*RULE_LEGO, RAMP, "0.5", *IN_BAND],
         "wd0-nodecay-lr0.04-tv2-inband": [*RULE_LEGO, *tv_weights(2.0), *IN_BAND],
         # Session 20: RegNeRF's depth smoothness on patches from poses between the four cameras, on the rule.
-        "wd0-nodecay-lr0.04-tv4-ds1": [*RULE_LEGO, *tv_weights(4.0), *depth_smoothness(1.0)],
+        "wd0-nodecay-lr0.04-tv4-ds1": [*LEGO_TV4, *depth_smoothness(1.0)],
         # Session 25: the curriculum's own levers again, now on the object rule's TV 4 (tried at TV 1 before).
-        "wd0-nodecay-lr0.04-tv4-ramp0.1": [*RULE_LEGO, *tv_weights(4.0), RAMP, "0.1"],
-        "wd0-nodecay-lr0.04-tv4-ramp0.5": [*RULE_LEGO, *tv_weights(4.0), RAMP, "0.5"],
-        "wd0-nodecay-lr0.04-tv4-ffinal0.85": [*RULE_LEGO, *tv_weights(4.0), F_FINAL, "0.85"],
-        "wd0-nodecay-lr0.04-tv4-f0.1": [*RULE_LEGO, *tv_weights(4.0), F0_DENSITY, "0.1", F0_COLOR, "0.1"],
-        "wd0-nodecay-lr0.04-tv4-f0.5": [*RULE_LEGO, *tv_weights(4.0), F0_DENSITY, "0.5", F0_COLOR, "0.5"],
+        "wd0-nodecay-lr0.04-tv4-ramp0.1": [*LEGO_TV4, RAMP, "0.1"],
+        "wd0-nodecay-lr0.04-tv4-ramp0.5": [*LEGO_TV4, RAMP, "0.5"],
+        "wd0-nodecay-lr0.04-tv4-ffinal0.85": [*LEGO_TV4, F_FINAL, "0.85"],
+        "wd0-nodecay-lr0.04-tv4-f0.1": [*LEGO_TV4, *first_band("0.1")],
+        "wd0-nodecay-lr0.04-tv4-f0.5": [*LEGO_TV4, *first_band("0.5")],
         "wd0-nodecay-lr0.06-tv4": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.06", *tv_weights(4.0)],
-        "wd0-nodecay-lr0.04-tv4-f0.05": [*RULE_LEGO, *tv_weights(4.0), F0_DENSITY, "0.05", F0_COLOR, "0.05"],
-        "wd0-nodecay-lr0.04-tv4-f0d0.1": [*RULE_LEGO, *tv_weights(4.0), F0_DENSITY, "0.1"],
+        "wd0-nodecay-lr0.04-tv4-f0.05": [*LEGO_TV4, *first_band("0.05")],
+        "wd0-nodecay-lr0.04-tv4-f0d0.1": [*LEGO_TV4, F0_DENSITY, "0.1"],
         "wd0-nodecay-lr0.04-tv4-f0.1-ffinal0.85": [
-            *RULE_LEGO, *tv_weights(4.0), F0_DENSITY, "0.1", F0_COLOR, "0.1", F_FINAL, "0.85"],
+            *LEGO_TV4, *first_band("0.1"), F_FINAL, "0.85"],
     },
     # Forward-facing scenes: the real-scene preset (the trainer applies it), its grid lr, the occlusion term, f0/Δ,
     # Floaters-No-More gradient scaling.
@@ -306,7 +313,7 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # Session 24: a wider first band (the real preset's f0 is 0.01: little more than the mean), and half the grid lr
         # for the longer run.
         "lr0.08-tvconst-ramp0.2667-tv4-revive1-f0.05": [
-            *FERN_PMID_RULE, *REVIVE1, F0_DENSITY, "0.05", F0_COLOR, "0.05",
+            *FERN_PMID_RULE, *REVIVE1, *first_band("0.05"),
         ],
         "lr0.04-tvconst-ramp0.2667-tv4-revive1": [*fern_rule("0.2667", lr="0.04"), *REVIVE1],
         # Session 24: the budget rule at 1500 iterations (band open by step 800), waiting for a fresh field or reviving

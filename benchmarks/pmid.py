@@ -269,6 +269,11 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "wd0-nodecay-lr0.04-tv4-bgrand": [*LEGO_TV4, "--pipeline.effects.background", "random"],
         "wd0-nodecay-lr0.04-tv4-comp8": [*LEGO_TV4, *components(8, 24)],
         "wd0-nodecay-lr0.04-tv6-comp8": [*RULE_LEGO, *tv_weights(6.0), *components(8, 24)],
+        "wd0-nodecay-lr0.04-tv4-comp4": [*LEGO_TV4, *components(4, 12)],
+        "wd0-nodecay-lr0.04-tv4-comp8-f0.1": [*LEGO_TV4, *components(8, 24), *first_band("0.1")],
+        "wd0-nodecay-lr0.04-tv4-comp8-f0.05": [*LEGO_TV4, *components(8, 24), *first_band("0.05")],
+        # Session 26: a band that stops short of the whole spectrum at P-MID, where 2400 iterations follow the ramp.
+        "wd0-nodecay-lr0.04-tv4-ffinald0.7": [*LEGO_TV4, F_FINAL, "0.7", F_FINAL_COLOR, "1.0"],
     },
     # Forward-facing scenes: the real-scene preset (the trainer applies it), its grid lr, the occlusion term, f0/Δ,
     # Floaters-No-More gradient scaling.

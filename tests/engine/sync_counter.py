@@ -9,6 +9,7 @@ data, then moved). On a CPU none of these costs anything, so they are counted by
 
 from __future__ import annotations
 
+import weakref
 from collections import Counter
 
 import torch
@@ -31,7 +32,9 @@ class SyncCounter(TorchFunctionMode):
         super().__init__()
         self.device_generator = device_generator
         self.calls: Counter[str] = Counter()
-        self._host: set[int] = set()  # ids of host-born tensors alive in the block
+        # host-born tensors alive in the block, by id; the weak reference tells a live one from a later tensor that
+        # reuses a dead one's id (a per-batch coin drawn on the host dies at once: its id is soon a device tensor's)
+        self._host: dict[int, weakref.ref[torch.Tensor]] = {}
 
     @property
     def total(self) -> int:
@@ -45,13 +48,13 @@ class SyncCounter(TorchFunctionMode):
             self.calls[reason] += 1
         out = func(*args, **kwargs)
         if isinstance(out, torch.Tensor) and self._host_born(name, kwargs):
-            self._host.add(id(out))
+            self._host[id(out)] = weakref.ref(out)
         return out
 
     def _why_it_waits(self, name: str, args: tuple, kwargs: dict) -> str | None:
         """What the call would wait for on a GPU, or None."""
         first = args[0] if args else None
-        on_host = isinstance(first, torch.Tensor) and id(first) in self._host
+        on_host = isinstance(first, torch.Tensor) and self._is_host_born(first)
         if name in READS:
             return None if on_host else name
         if name in DATA_DEPENDENT:
@@ -61,6 +64,10 @@ class SyncCounter(TorchFunctionMode):
         if (name in ("to", "cuda", "copy_") and on_host) or (name in FROM_HOST and kwargs.get("device") is not None):
             return f"host -> device ({name})"
         return None
+
+    def _is_host_born(self, tensor: torch.Tensor) -> bool:
+        ref = self._host.get(id(tensor))
+        return ref is not None and ref() is tensor
 
     def _host_born(self, name: str, kwargs: dict) -> bool:
         generator = kwargs.get("generator")

@@ -1,0 +1,31 @@
+"""The sync counter itself: what it counts must not depend on which ids the allocator hands out."""
+
+from __future__ import annotations
+
+import torch
+
+from tests.engine.sync_counter import SyncCounter
+
+
+def test_a_host_tensor_moved_to_the_device_is_counted() -> None:
+    with SyncCounter() as counter:
+        torch.tensor([1.0]).to(torch.float64)
+    assert counter.calls["host -> device (to)"] == 1
+
+
+def test_a_device_tensor_that_reuses_a_dead_host_tensors_id_is_not_counted() -> None:
+    """The flake this guards: a per-batch coin drawn on the host dies at once, and a later device tensor that gets
+    its id was counted as a host copy when moved."""
+    reused = False
+    with SyncCounter() as counter:
+        for _ in range(10_000):
+            host = torch.tensor([1.0])
+            host_id = id(host)
+            del host
+            device = torch.zeros(1)
+            if id(device) == host_id:
+                reused = True
+                device.to(torch.float64)
+                break
+    assert reused, "the allocator never reused an id: the case was not exercised"
+    assert counter.calls["host -> device (to)"] == 0, dict(counter.calls)

@@ -175,6 +175,9 @@ def fern_rule(ramp: str, tv: float = 4.0, lr: str = "0.08") -> list[str]:
 FERN_PMID_RULE = fern_rule("0.2667")
 """Session 19's forward-facing rule at 3000 iterations (the band open by step 800, constant TV 4), which P-MID's fern
 settings of sessions 19, 23 and 24 vary."""
+FERN_TV4 = ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(4.0)]
+"""The forward-facing rule at 800 iterations (grid lr 0.08, constant TV 4; the preset's band), which P-CPU's fern
+settings of sessions 16-26 vary."""
 
 
 def first_band(f0: str) -> list[str]:
@@ -297,20 +300,17 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-tvconst-ramp0.25": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.25"],
         # Session 16: TV 4 won on lego for both methods; does a stronger TV term carry to a forward-facing scene?
         "lr0.08-tvconst-tv2": ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(2.0)],
-        "lr0.08-tvconst-tv4": ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(4.0)],
+        "lr0.08-tvconst-tv4": FERN_TV4,
         # Session 17: the forward-facing rule at 3000 iterations (band open by step 800: 800 / 3000).
         "lr0.08-tvconst-ramp0.2667": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667"],
         "lr0.08-tvconst-ramp0.2667-tv4": FERN_PMID_RULE,
         # Session 18: Floaters-No-More (tensorf-vm's val choice at 800 iterations, TV 1) on top of TV 4.
-        "lr0.08-tvconst-tv4-fnm": ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(4.0), *FNM],
+        "lr0.08-tvconst-tv4-fnm": [*FERN_TV4, *FNM],
         # Session 19: the same for fourierf-vm at 3000 iterations, with the rule's ramp (band open by step 800).
         "lr0.08-tvconst-ramp0.2667-tv4-fnm": [*FERN_PMID_RULE, *FNM],
         # Session 20: RegNeRF's depth smoothness on 8×8 patches from poses between the training cameras, on the rule.
         **{
-            f"lr0.08-tvconst-tv4-ds{weight}": [
-                "--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(4.0), *depth_smoothness(weight),
-            ]
-            for weight in (0.1, 1, 10)
+            f"lr0.08-tvconst-tv4-ds{weight}": [*FERN_TV4, *depth_smoothness(weight)] for weight in (0.1, 1, 10)
         },
         # Session 23: around the P-MID choice on seeds 1 and 2 (one GPU call): a stronger TV, a band open by step 450.
         "lr0.08-tvconst-ramp0.2667-tv6": fern_rule("0.2667", tv=6.0),
@@ -338,12 +338,12 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # at once, for both methods.
         "lr0.08-tvconst-ramp0.5333-tv4": fern_rule("0.5333"),
         "lr0.08-tvconst-ramp0.5333-tv4-revive1": [*fern_rule("0.5333"), *REVIVE1],
-        "lr0.08-tvconst-tv4-revive1": ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(4.0), *REVIVE1],
+        "lr0.08-tvconst-tv4-revive1": [*FERN_TV4, *REVIVE1],
         # ... and at 3000 iterations the band open by step 1500 instead of 800.
         "lr0.08-tvconst-ramp0.5-tv4-revive1": [*fern_rule("0.5"), *REVIVE1],
         # Session 26: half TensoRF's component counts (lego's object rule gained 0.14 dB over 3 seeds at P-CPU) on
         # fourierf-vm's P-CPU choice.
-        "lr0.08-tvconst-tv4-comp8": ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(4.0), *components(8, 24)],
+        "lr0.08-tvconst-tv4-comp8": [*FERN_TV4, *components(8, 24)],
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband")

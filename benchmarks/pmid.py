@@ -138,7 +138,8 @@ PROTOCOLS = {  # name, iterations, rays per batch, initial and final grid side, 
     "pcpu1040": Protocol("P-CPU, 1040 it.", 1040, 1024, 64, 128, 4),
     # P-CPU's sizes at P-MID's 3000 iterations, for the curve along training (the ``curve`` stage only).
     "pcpu3000": Protocol("P-CPU sizes, 3000 it.", 3000, 1024, 64, 128, 4),
-    # Between the two: where the budget rule's revival at once (over 800 iterations) starts to pay.
+    # Between the two: where the budget rule's revival at once (over 800 iterations) starts to pay (fern), and whether
+    # P-CPU's val choices carry past 800 iterations (lego, session 27).
     "pcpu1500": Protocol("P-CPU sizes, 1500 it.", 1500, 1024, 64, 128, 4),
 }
 CURVE_BASE = {"pcpu3000": "pcpu", "pmid": "pmid800"}
@@ -157,6 +158,10 @@ F0_DENSITY, F0_COLOR = "--pipeline.model.fourier.f0-density", "--pipeline.model.
 FNM = ["--pipeline.model.floaters-gradient-scaling", "True"]
 FNM_FROM = "--pipeline.model.floaters-gradient-scaling-from"
 IN_BAND = ["--pipeline.model.fourier.init-in-band", "True"]
+LATE_ALPHA_MASK = ["--pipeline.model.occupancy-update-fractions", "0.3", "0.5"]
+"""The occupancy grid's two updates at 30 % and 50 % of the run (the object default: 20 % and 40 %)."""
+EARLY_FINAL_GRID = ["--pipeline.model.field.upsample-fractions", "0.01"]
+"""One upsample at 1 % of the run: the field holds the final grid from step 8 (at 800 iterations) on."""
 RULE_LEGO = [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.04"]
 REVIVE1 = ["--pipeline.model.field.revive-patience", "1"]
 PLAIN_RELU = ["--pipeline.model.field.revive-dead-density", "False"]
@@ -277,6 +282,20 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "wd0-nodecay-lr0.04-tv4-comp8-f0.05": [*LEGO_TV4, *components(8, 24), *first_band("0.05")],
         # Session 26: a band that stops short of the whole spectrum at P-MID, where 2400 iterations follow the ramp.
         "wd0-nodecay-lr0.04-tv4-ffinald0.7": [*LEGO_TV4, F_FINAL, "0.7", F_FINAL_COLOR, "1.0"],
+        # Session 27: the final grid from step 8 (one upsample at 1 % of the run) instead of TensoRF's 64³ -> 128³ over
+        # two upsamples: the band's opening is then the only coarse-to-fine schedule, where a bare TensoRF overfits.
+        "wd0-nodecay-lr0.04-tv4-comp8-up0.01": [*LEGO_TV4, *components(8, 24), *EARLY_FINAL_GRID],
+        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-up0.01": [
+            *LEGO_TV4, *components(8, 24), *first_band("0.05"), *EARLY_FINAL_GRID],
+        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-ramp0.5-up0.01": [
+            *LEGO_TV4, *components(8, 24), *first_band("0.05"), RAMP, "0.5", *EARLY_FINAL_GRID],
+        # Session 27: P-CPU's val choice lost 0.8 dB at 1500 iterations; does the initial noise waiting outside its
+        # narrow first band (weight decay 0 keeps it) explain it?
+        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-inband": [*LEGO_TV4, *components(8, 24), *first_band("0.05"), *IN_BAND],
+        # Session 27: the narrow first band's renders at 1500 show holes in the body: is it the occupancy grid's first
+        # update (20 % of the run, the step the band opens fully) pruning cells the band-limited field has not filled?
+        "wd0-nodecay-lr0.04-tv4-f0.05-alphamask0.3": [*LEGO_TV4, *first_band("0.05"), *LATE_ALPHA_MASK],
+        "wd0-nodecay-lr0.04-tv4-alphamask0.3": [*LEGO_TV4, *LATE_ALPHA_MASK],
     },
     # Forward-facing scenes: the real-scene preset (the trainer applies it), its grid lr, the occlusion term, f0/Δ,
     # Floaters-No-More gradient scaling.

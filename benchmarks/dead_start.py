@@ -44,7 +44,7 @@ from fourierf_plugin.engine.optimizers import build_optimizer
 from fourierf_plugin.engine.trainer import Trainer, optimisation_step
 from fourierf_plugin.field_components.activations import RevivingReLU
 from fourierf_plugin.method_configs import finalize
-from fourierf_plugin.scripts.train import parse_args
+from fourierf_plugin.scripts.train import given_options, parse_args
 from fourierf_plugin.utils.console import get_console
 
 REPO = Path(__file__).resolve().parents[1]
@@ -56,7 +56,7 @@ END = "<!-- dead-start:end -->"
 def first_steps(argv: list[str], steps: int) -> tuple[list[float], list[bool]]:
     """Training MSE of the first ``steps`` iterations of the run these ``fourierf-train`` arguments describe, and
     whether each step's batch had no positive density (read off the field's densities, whatever its ReLU)."""
-    config, _ = finalize(parse_args(argv))
+    config, _ = finalize(parse_args(argv), given_options(argv))
     trainer = Trainer(config)
     pipeline, model = trainer.pipeline, trainer.pipeline.model
     reset_steps = [s + 1 for s in model.reset_steps()]

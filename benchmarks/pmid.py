@@ -205,7 +205,8 @@ def depth_smoothness(weight: float) -> list[str]:
 
 TV_LOW = tv_weights(0.1)
 LEGO_TV4 = [*RULE_LEGO, *tv_weights(4.0)]
-"""The object rule as it stands since session 16 (TV 4), which the lego settings of sessions 20 and 25 vary."""
+"""The object rule of sessions 16-26 (TV 4), which the lego settings of sessions 20 and 25-27 vary; since session 27
+the rule also has half the components (``...-tv4-comp8``)."""
 SETTINGS: dict[str, dict[str, list[str]]] = {
     # Object scenes: the synthetic preset and the levers the issue names (weight decay, lr decay, TV, f0/Δ).
     "lego": {

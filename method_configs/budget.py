@@ -3,8 +3,9 @@
 Why a rule of the iteration count and not of the scene: on validation views (BENCHMARKS.md, "Few-shot quality at two
 budgets") the same changes won on lego and on fern. Below the paper's budget an object is fitted better, by FourieRF
 and by TensoRF alike, without the paper's weight decay 0.2 and without TensoRF's lr and TV decay (the official code's
-optimiser), at a grid lr 0.04 and with TV 4 on the planes (``OBJECT_TV_WEIGHT``; lego val, the preset's -> the
-rule's: FourieRF 21.30 -> 22.57 at 800 iterations, 20.34 -> 22.48 at 3000; TensoRF 21.41 -> 22.62, 20.50 -> 21.74).
+optimiser), at a grid lr 0.04, with TV 4 on the planes (``OBJECT_TV_WEIGHT``; lego val, the preset's -> the
+rule's: FourieRF 21.30 -> 22.57 at 800 iterations, 20.34 -> 22.48 at 3000; TensoRF 21.41 -> 22.62, 20.50 -> 21.74)
+and with half TensoRF's components (``OBJECT_COMPONENTS``).
 A forward-facing scene wants a 4x grid learning rate (TensoRF's 0.02 is tuned for 25k iterations: fern val 18.91 ->
 19.33 at 800, 18.27 -> 19.97 at 3000; tensorf-vm likewise) and a constant TV weight of 4 on the planes
 (``REAL_TV_WEIGHT``), both methods alike, and FourieRF, in a longer run, its band open by step 800
@@ -29,6 +30,23 @@ lego's val views at the rest of the object rule. 800 iterations, mean of 3 seeds
 4 22.59 (TV 1 22.02, one seed); tensorf-vm TV 1 22.04, 4 22.69 (6 22.40, one seed). 3000 iterations (P-MID), one
 seed: fourierf-vm TV 1 21.97, 2 22.44, 4 22.48, 6 22.05; tensorf-vm TV 1 20.38, 4 21.74, 6 22.22, 8 22.07 (3 seeds:
 fourierf-vm TV 4 22.57, tensorf-vm TV 6 22.45)."""
+
+OBJECT_COMPONENTS = (8, 24)
+"""Object scenes, both methods: density and appearance components per plane/line group, half TensoRF's (16, 48). Chosen
+on lego's val views at the rest of the object rule, mean of 3 seeds, 16 / 48 -> 8 / 24: 800 iterations fourierf-vm
+22.59 -> 22.73, tensorf-vm 22.69 -> 22.70; 1500 iterations 22.64 -> 22.77, 22.79 -> 22.84; 3000 (P-MID), one seed,
+22.48 -> 22.50, tensorf-vm at TV 6 22.22 -> 22.23. A quarter (4 / 12) lost at 800 (22.33, 22.55, one seed). Fewer
+channels to filter, sample and decode make every step cheaper (interleaved A/B of fourierf-vm at 800 iterations, 2
+pairs: 0.89x the run's time, 0.86x a step's; BENCHMARKS.md). Forward-facing scenes keep
+TensoRF's LLFF counts: half lost on fern (800 iterations, one seed: fourierf-vm 20.24 -> 20.02, tensorf-vm 19.50 ->
+18.60)."""
+
+OBJECT_COMPONENTS_FROM = 800
+"""Object runs this long or longer get ``OBJECT_COMPONENTS``; shorter ones keep TensoRF's counts. Fewer components
+light a fresh field more slowly (the density of a fresh grid rises with the number of products summed): train PSNR
+at step 75 of 1500 on lego, seed 1, fourierf-vm 21.53 -> 20.91, tensorf-vm 21.46 -> 18.44, and a 40-step run of the
+tests' 16³ scene reached 10.7 against 15.5. By step 225 the runs are level, so the counts change only where measured
+(800 iterations and up)."""
 
 REAL_TV_WEIGHT = 4.0
 """Forward-facing scenes, both methods: a constant TV weight on the density and appearance planes (the paper's 1.0,
@@ -56,7 +74,8 @@ _OBJECT_RULE: dict[str, Any] = {
 _REAL_RULE: dict[str, Any] = {"optimizer.lr_grids": 0.08, "pipeline.model.tv_decay_ratio": 1.0, **_tv(REAL_TV_WEIGHT)}
 SHORT_RUN_SETTINGS: dict[tuple[str, str], dict[str, Any]] = {
     # Object scenes, both methods alike (so the only difference stays the curriculum): the official code's optimiser
-    # (no weight decay, no lr and so no TV decay) at twice TensoRF's grid learning rate, and a stronger TV term.
+    # (no weight decay, no lr and so no TV decay) at twice TensoRF's grid learning rate and a stronger TV term (and,
+    # from ``OBJECT_COMPONENTS_FROM`` iterations on, half TensoRF's components).
     ("fourierf-vm", "synthetic"): _OBJECT_RULE,
     ("tensorf-vm", "synthetic"): _OBJECT_RULE,
     # Forward-facing scenes, both methods alike: a 4x grid learning rate and a constant, stronger TV term.
@@ -101,11 +120,24 @@ def ramp_fraction(scene_preset: str, iterations: int) -> float | None:
     return None
 
 
+def object_components(scene_preset: str, iterations: int) -> dict[str, Any]:
+    """The rule's component counts (none: the preset's): half TensoRF's for an object run of 800 iterations or more."""
+    if scene_preset != "synthetic" or iterations < OBJECT_COMPONENTS_FROM:
+        return {}
+    density, appearance = OBJECT_COMPONENTS
+    return {
+        "pipeline.model.field.density_components": (density,) * 3,
+        "pipeline.model.field.appearance_components": (appearance,) * 3,
+    }
+
+
 def short_run_settings(method: str, scene_preset: str, iterations: int) -> dict[str, Any]:
     """What the budget rule sets for a run of ``iterations`` of ``method`` under ``scene_preset``."""
     if iterations >= PAPER_ITERATIONS:
         return {}
     settings = dict(SHORT_RUN_SETTINGS.get((method, scene_preset), {}))
+    if (method, scene_preset) in SHORT_RUN_SETTINGS:
+        settings |= object_components(scene_preset, iterations)
     ramp = ramp_fraction(scene_preset, iterations) if method == "fourierf-vm" else None
     if ramp is not None:
         settings["pipeline.model.fourier.ramp_fraction"] = ramp
@@ -115,14 +147,17 @@ def short_run_settings(method: str, scene_preset: str, iterations: int) -> dict[
     return settings
 
 
-def apply_budget_rule(config: TrainerConfig, pristine: TrainerConfig | None) -> list[str]:
-    """Set the short-run values where the user left the preset's (a flag always wins); the note that says so."""
+def apply_budget_rule(
+    config: TrainerConfig, pristine: TrainerConfig | None, given: frozenset[str] = frozenset()
+) -> list[str]:
+    """Set the short-run values where the user left the preset's (a flag, ``given``, always wins); the note that
+    says so."""
     if not config.budget_rule:
         return []
     settings = short_run_settings(config.method_name, config.scene_preset, config.max_num_iterations)
     if not settings:
         return []
-    applied, kept = apply_settings(config, pristine, settings)
+    applied, kept = apply_settings(config, pristine, settings, given)
     if not applied:
         return []
     note = f"budget rule ({config.max_num_iterations} < {PAPER_ITERATIONS} iterations): {', '.join(applied)}"

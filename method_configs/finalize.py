@@ -29,9 +29,10 @@ def config_registry() -> dict[str, type]:
     return config_classes()
 
 
-def finalize(config: TrainerConfig) -> tuple[TrainerConfig, list[str]]:
+def finalize(config: TrainerConfig, given: frozenset[str] = frozenset()) -> tuple[TrainerConfig, list[str]]:
     """A copy of ``config`` with ``--data`` in its parser, the scene preset applied and the scene's effects resolved;
-    and the notes that say what was decided and why (for the caller to print)."""
+    and the notes that say what was decided and why (for the caller to print). ``given``: the config paths of the
+    flags the user typed (``given_options``), which no preset, sizing or rule overrides."""
     config = copy.deepcopy(config)
     parser = config.pipeline.datamanager.dataparser
     if config.data is not None and str(parser.data) != "." and Path(parser.data) != Path(config.data):
@@ -54,15 +55,15 @@ def finalize(config: TrainerConfig) -> tuple[TrainerConfig, list[str]]:
     if preset == "auto":
         preset = "synthetic" if declared.bounded else "real"
     if preset == "real":
-        applied, kept = apply_real_scene_preset(config, all_methods.get(config.method_name))
+        applied, kept = apply_real_scene_preset(config, all_methods.get(config.method_name), given)
         reason = "the scene is forward-facing" if config.scene_preset == "auto" else "--scene-preset real"
         notes.append(f"real-scene preset ({reason}): {', '.join(applied)}")
         if kept:
             notes.append(f"  kept your settings for: {', '.join(kept)}")
     config.scene_preset = preset
     reference = preset_under_scene(all_methods.get(config.method_name), preset)
-    notes += size_the_run(config, reference, not declared.bounded)
-    notes += apply_budget_rule(config, reference)
+    notes += size_the_run(config, reference, not declared.bounded, given)
+    notes += apply_budget_rule(config, reference, given)
     resolve_tv_decay(config)
     effects = config.pipeline.effects.resolve(declared)
     config.pipeline.effects = EffectsConfig.of(effects)
@@ -88,13 +89,15 @@ def resolve_tv_decay(config: TrainerConfig) -> None:
         model.tv_decay_ratio = config.optimizer.lr_decay_ratio
 
 
-def size_the_run(config: TrainerConfig, pristine: TrainerConfig | None, forward_facing: bool) -> list[str]:
+def size_the_run(
+    config: TrainerConfig, pristine: TrainerConfig | None, forward_facing: bool, given: frozenset[str] = frozenset()
+) -> list[str]:
     """Iterations, batch and grid from the training images, the device and the kind of scene (``sizing``), where the
     user left the preset's values; the note that says so."""
     train = config.pipeline.datamanager.dataparser.setup().get_outputs("train")
     views, height, width = train.images.shape[0], train.cameras.height, train.cameras.width
     size = run_size(views, height, width, pick_device(config.device), forward_facing)
-    applied, kept = apply_settings(config, pristine, size.settings())
+    applied, kept = apply_settings(config, pristine, size.settings(), given)
     if not applied:
         return []
     note = f"run size for {size.reason}: {', '.join(applied)}"

@@ -58,20 +58,27 @@ def real_scene_settings(config: Any) -> dict[str, Any]:
     return settings
 
 
-def apply_real_scene_preset(config: Any, pristine: Any | None) -> tuple[list[str], list[str]]:
-    """Set the real-scene values where ``config`` still equals ``pristine`` (the unmodified method preset)."""
-    return apply_settings(config, pristine, real_scene_settings(config))
+def apply_real_scene_preset(
+    config: Any, pristine: Any | None, given: frozenset[str] = frozenset()
+) -> tuple[list[str], list[str]]:
+    """Set the real-scene values where ``config`` still equals ``pristine`` (the unmodified method preset) and the
+    user typed no flag (``given``)."""
+    return apply_settings(config, pristine, real_scene_settings(config), given)
 
 
-def apply_settings(config: Any, pristine: Any | None, settings: dict[str, Any]) -> tuple[list[str], list[str]]:
-    """Set each ``settings`` value (config path -> value) where ``config`` still equals ``pristine``.
+def apply_settings(
+    config: Any, pristine: Any | None, settings: dict[str, Any], given: frozenset[str] = frozenset()
+) -> tuple[list[str], list[str]]:
+    """Set each ``settings`` value (config path -> value) where ``config`` still equals ``pristine`` and its path is
+    not among ``given``, the paths of the flags the user typed: a flag typed with the preset's own value (say
+    ``--max-num-iterations 10000``) wins too, though the config alone cannot tell it from the default.
 
     Returns the settings applied and the ones kept because the user set them. Without a pristine preset (a
-    third-party method) every value is applied.
+    third-party method) every value not given is applied.
     """
     applied, kept = [], []
     for path, value in settings.items():
-        if pristine is not None and _get(config, path) != _get(pristine, path):
+        if path in given or (pristine is not None and _get(config, path) != _get(pristine, path)):
             kept.append(path)
             continue
         _set(config, path, value)

@@ -22,8 +22,16 @@ def parse_args(args: list[str]) -> TrainerConfig:
     return copy.deepcopy(tyro.cli(AnnotatedMethodUnion, args=args))  # type: ignore[arg-type]
 
 
-def build_config(config: TrainerConfig) -> tuple[TrainerConfig, list[str]]:
-    """The finished config of a new run (``finalize``) or the saved one of a run to resume, and the notes to print."""
+def given_options(args: list[str]) -> frozenset[str]:
+    """Config paths of the flags in ``args`` (``--optimizer.weight-decay=0.2`` -> ``optimizer.weight_decay``), so that
+    a value typed equal to the preset's own still wins over the scene preset, the run sizing and the budget rule."""
+    flags = (arg[2:].split("=", 1)[0] for arg in args if arg.startswith("--") and len(arg) > 2)
+    return frozenset(flag.replace("-", "_") for flag in flags)
+
+
+def build_config(config: TrainerConfig, given: frozenset[str] = frozenset()) -> tuple[TrainerConfig, list[str]]:
+    """The finished config of a new run (``finalize``, ``given`` the paths of the typed flags) or the saved one of a
+    run to resume, and the notes to print."""
     if config.load_dir is not None:
         ignored = ignored_on_resume(config)
         if ignored:
@@ -37,11 +45,12 @@ def build_config(config: TrainerConfig) -> tuple[TrainerConfig, list[str]]:
     if config.data is None and str(config.pipeline.datamanager.dataparser.data) == ".":
         fail("no scene given", "pass --data PATH_TO_SCENE (e.g. --data demo/lego_tiny), or --load-dir RUN to resume")
     check_training_options(config)  # before any file of the scene is read
-    return finalize(config)
+    return finalize(config, given)
 
 
 def main(args: list[str] | None = None) -> None:
-    config, notes = build_config(parse_args(strip_verbose(sys.argv[1:] if args is None else args)))
+    argv = strip_verbose(sys.argv[1:] if args is None else args)
+    config, notes = build_config(parse_args(argv), given_options(argv))
     for note in notes:
         get_console().print(note, soft_wrap=True)
     Trainer(config, build_observers(config)).train()

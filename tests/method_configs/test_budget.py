@@ -10,6 +10,8 @@ import pytest
 from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig
 from fourierf_plugin.method_configs import all_methods, finalize
 from fourierf_plugin.method_configs.budget import (
+    OBJECT_COMPONENTS,
+    OBJECT_COMPONENTS_FROM,
     OBJECT_TV_WEIGHT,
     PAPER_ITERATIONS,
     REAL_RAMP_ITERATIONS,
@@ -18,7 +20,7 @@ from fourierf_plugin.method_configs.budget import (
     SHORT_RUN_SETTINGS,
     short_run_settings,
 )
-from fourierf_plugin.scripts.train import parse_args
+from fourierf_plugin.scripts.train import given_options, parse_args
 from tests.helpers import TINY_SCENE
 from tests.scenes import write_llff_scene
 
@@ -30,7 +32,8 @@ def llff_scene(tmp_path_factory) -> Path:
 
 def finished(method: str, data: Path, *flags: str):
     parser = ["llff-data", "--num-views", "3"] if (data / "poses_bounds.npy").exists() else []
-    config, notes = finalize(parse_args([method, "--data", str(data), "--device", "cpu", *flags, *parser]))
+    args = [method, "--data", str(data), "--device", "cpu", *flags, *parser]
+    config, notes = finalize(parse_args(args), given_options(args))
     return config, notes
 
 
@@ -38,8 +41,14 @@ def test_rule_is_a_function_of_the_iteration_count() -> None:
     tv = OBJECT_TV_WEIGHT
     short = {"optimizer.weight_decay": 0.0, "optimizer.lr_decay_ratio": 1.0, "optimizer.lr_grids": 0.04}
     short |= {"pipeline.model.tv_weight_density": tv, "pipeline.model.tv_weight_appearance": tv}
+    assert short_run_settings("fourierf-vm", "synthetic", OBJECT_COMPONENTS_FROM - 1) == short, "TensoRF's counts"
+    density, appearance = OBJECT_COMPONENTS
+    short |= {
+        "pipeline.model.field.density_components": (density,) * 3,
+        "pipeline.model.field.appearance_components": (appearance,) * 3,
+    }
     assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS - 1) == short
-    assert short_run_settings("tensorf-vm", "synthetic", 800) == short, "objects: the same rule, masks off"
+    assert short_run_settings("tensorf-vm", "synthetic", OBJECT_COMPONENTS_FROM) == short, "the same rule, masks off"
     assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS) == {}
     real = {"optimizer.lr_grids": 0.08, "pipeline.model.tv_decay_ratio": 1.0}
     real |= {"pipeline.model.tv_weight_density": REAL_TV_WEIGHT, "pipeline.model.tv_weight_appearance": REAL_TV_WEIGHT}
@@ -72,6 +81,9 @@ def test_cpu_run_of_an_object_drops_weight_decay_and_says_so() -> None:
     assert config.optimizer.lr_grids == 0.04
     model = config.pipeline.model
     assert model.tv_weight_density == model.tv_weight_appearance == OBJECT_TV_WEIGHT
+    preset_field = all_methods["fourierf-vm"].pipeline.model.field
+    assert model.field.density_components == (OBJECT_COMPONENTS[0],) * 3 != preset_field.density_components
+    assert model.field.appearance_components == (OBJECT_COMPONENTS[1],) * 3 != preset_field.appearance_components
     assert model.fourier.ramp_fraction == all_methods["fourierf-vm"].pipeline.model.fourier.ramp_fraction, "the paper's"
     assert any(n.startswith("budget rule") and "weight_decay=0.0" in n for n in notes)
 
@@ -87,6 +99,24 @@ def test_a_flag_wins_over_the_rule() -> None:
     assert config.optimizer.weight_decay == 0.05
     assert config.optimizer.lr_decay_ratio == 1.0, "the values the user did not touch still follow the rule"
     assert any(n.startswith("budget rule") and "kept your optimizer.weight_decay" in n for n in notes)
+
+
+def test_a_flag_typed_with_the_presets_own_value_wins_too() -> None:
+    """The config alone cannot tell ``--pipeline.model.field.density-components 16 16 16`` from the preset's default:
+    the typed flags can."""
+    preset = all_methods["fourierf-vm"]
+    density = preset.pipeline.model.field.density_components
+    flag = ["--pipeline.model.field.density-components", *map(str, density)]
+    config, notes = finished("fourierf-vm", TINY_SCENE, *flag)
+    assert config.pipeline.model.field.density_components == density
+    assert config.pipeline.model.field.appearance_components == (OBJECT_COMPONENTS[1],) * 3, "the untyped one follows"
+    assert any("kept your pipeline.model.field.density_components" in n for n in notes)
+    # the paper's budget typed on a CPU: neither the run sizing nor the rule shortens or changes it
+    flag = f"--max-num-iterations={preset.max_num_iterations}"
+    config, notes = finished("fourierf-vm", TINY_SCENE, flag)
+    assert config.max_num_iterations == preset.max_num_iterations == PAPER_ITERATIONS
+    assert config.optimizer.weight_decay == preset.optimizer.weight_decay
+    assert not any(n.startswith("budget rule") for n in notes)
 
 
 def test_the_rule_can_be_turned_off() -> None:

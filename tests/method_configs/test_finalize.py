@@ -23,7 +23,7 @@ from fourierf_plugin.data.parsers.llff import LLFF_DECLARATION, LLFFDataParserCo
 from fourierf_plugin.data.scene_effects import EffectsConfig, SceneEffects
 from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.method_configs import all_methods, config_registry, finalize, resume_config
-from fourierf_plugin.method_configs.budget import OBJECT_TV_WEIGHT
+from fourierf_plugin.method_configs.budget import OBJECT_COMPONENTS, OBJECT_TV_WEIGHT
 from fourierf_plugin.method_configs.finalize import ignored_on_resume
 from fourierf_plugin.method_configs.scene_presets import (
     REAL_SCENE_SETTINGS,
@@ -65,6 +65,8 @@ def without_decisions(config: TrainerConfig) -> dict:
     data["pipeline"]["datamanager"].pop("rays_per_batch")
     data["pipeline"]["model"]["field"].pop("n_voxels_init")
     data["pipeline"]["model"]["field"].pop("n_voxels_final")
+    data["pipeline"]["model"]["field"].pop("density_components")
+    data["pipeline"]["model"]["field"].pop("appearance_components")
     for tv in ("tv_decay_ratio", "tv_weight_density", "tv_weight_appearance"):
         data["pipeline"]["model"].pop(tv)
     data["pipeline"]["model"]["fourier"].pop("ramp_fraction")
@@ -94,7 +96,8 @@ def test_blender_scene_keeps_the_synthetic_preset_and_gets_its_declared_effects(
     assert notes[0].startswith("run size for 4 view(s) of 100x100 on cpu: ")
     assert notes[1].startswith(
         "budget rule (800 < 10000 iterations): weight_decay=0.0, lr_decay_ratio=1.0, lr_grids=0.04, "
-        f"tv_weight_density={OBJECT_TV_WEIGHT}, tv_weight_appearance={OBJECT_TV_WEIGHT};"
+        f"tv_weight_density={OBJECT_TV_WEIGHT}, tv_weight_appearance={OBJECT_TV_WEIGHT}, "
+        f"density_components={(OBJECT_COMPONENTS[0],) * 3}, appearance_components={(OBJECT_COMPONENTS[1],) * 3};"
     )
     assert notes[2:] == [
         "scene effects: background=white, rays=euclidean, view-dependent=no, occlusion-regularisation=no "

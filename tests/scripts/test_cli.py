@@ -13,7 +13,7 @@ from fourierf_plugin.method_configs import all_descriptions, all_methods
 from fourierf_plugin.scripts import eval as eval_script
 from fourierf_plugin.scripts import train as train_script
 from fourierf_plugin.scripts.cli import EXIT_USER_ERROR
-from fourierf_plugin.scripts.train import build_config, parse_args
+from fourierf_plugin.scripts.train import build_config, given_options, parse_args
 from tests.helpers import REPO_ROOT, TINY_SCENE, cli_exit_code, tiny_args, venv_script
 
 PRESETS = ["fourierf-vm", "fourierf-cp", "fourierf-vm-code", "tensorf-vm", "tensorf-cp"]
@@ -79,6 +79,15 @@ def test_flags_of_the_old_layout_are_refused(old_flag: str, capsys) -> None:
         parse_args(["fourierf-vm", old_flag, "1"])
     assert info.value.code == 2
     assert old_flag in capsys.readouterr().err
+
+
+def test_given_options_are_the_config_paths_of_the_typed_flags() -> None:
+    args = ["fourierf-vm", "--optimizer.weight-decay=0.2", "--pipeline.model.field.density-components", "16", "16"]
+    args += ["--max-num-iterations", "10000", "blender-data", "--downscale", "4", "-", "--"]
+    assert given_options(args) == {
+        "optimizer.weight_decay", "pipeline.model.field.density_components", "max_num_iterations", "downscale",
+    }  # fmt: skip
+    assert given_options(["fourierf-vm"]) == frozenset()
 
 
 def test_cp_swap_on_the_vm_preset() -> None:

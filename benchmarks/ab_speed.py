@@ -91,6 +91,21 @@ def export_tree(rev: str | None, where: Path) -> Path:
     return where
 
 
+def revision_label(rev: str | None) -> str:
+    """What a side ran, in words that stay true after later commits: ``rev`` with its commit (``HEAD (abc1234)``), or
+    the working tree on its commit, marked when it held uncommitted changes."""
+    head = subprocess.run(
+        ["git", "rev-parse", "--short", rev or "HEAD"], cwd=REPO, check=True, capture_output=True, text=True
+    ).stdout.strip()
+    if rev is not None:
+        return rev if rev.startswith(head) else f"{rev} ({head})"
+    dirty = subprocess.run(
+        ["git", "status", "--porcelain", "--untracked-files=no", *SOURCES], cwd=REPO, check=True, capture_output=True,
+        text=True,
+    ).stdout.strip()  # fmt: skip
+    return f"the working tree on {head}" + (", with uncommitted changes" if dirty else "")
+
+
 def run_side(code: Path, label: str, seed: int, work: Path, shared: Path) -> dict:
     """Train and evaluate one P-CPU run with the package in ``code``; its timings and PSNR."""
     env = dict(os.environ, PYTHONPATH=str(code))
@@ -208,6 +223,7 @@ def main() -> None:
         print("\n".join(write_report(args.work, args.markdown)))
         return
     args.work.mkdir(parents=True, exist_ok=True)
+    labels = {"old": revision_label(args.old), "new": revision_label(args.new)}
     codes = {"old": export_tree(args.old, args.work / "code-old"), "new": export_tree(args.new, args.work / "code-new")}
     rows = []
     for i in range(args.pairs):
@@ -227,7 +243,7 @@ def main() -> None:
             timings[side].append(time_iterations(codes[side], first[side]))
     (args.work / "iterations.json").write_text(json.dumps(timings))
     meta = {
-        "old": args.old, "new": args.new or "working tree", "describe": args.describe, "pairs": args.pairs,
+        "old": labels["old"], "new": labels["new"], "describe": args.describe, "pairs": args.pairs,
         "seeds": [args.seeds[i % len(args.seeds)] for i in range(args.pairs)],
         "command": "python benchmarks/ab_speed.py " + shlex.join(sys.argv[1:]),
     }  # fmt: skip

@@ -64,3 +64,12 @@ def test_a_report_without_a_recorded_ab_is_one_clear_error(tmp_path: Path) -> No
     assert done.returncode != 0 and "Traceback" not in done.stderr
     assert f"no A/B recorded in {tmp_path}" in done.stderr and "results.jsonl" in done.stderr
     assert not (tmp_path / "B.md").exists()
+
+
+def test_each_side_is_named_by_its_commit(ab_speed: ModuleType) -> None:
+    """A side named "HEAD" or "working tree" in BENCHMARKS.md would name another version after the next commit."""
+    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=SCRIPT.parents[1], check=True,
+                          capture_output=True, text=True).stdout.strip()  # fmt: skip
+    assert ab_speed.revision_label("HEAD") == f"HEAD ({head})"
+    assert ab_speed.revision_label(head) == head
+    assert ab_speed.revision_label(None).startswith(f"the working tree on {head}")

@@ -35,11 +35,11 @@ OBJECT_COMPONENTS = (8, 24)
 """Object scenes, both methods: density and appearance components per plane/line group, half TensoRF's (16, 48). Chosen
 on lego's val views at the rest of the object rule, mean of 3 seeds, 16 / 48 -> 8 / 24: 800 iterations fourierf-vm
 22.59 -> 22.73, tensorf-vm 22.69 -> 22.70; 1500 iterations 22.64 -> 22.77, 22.79 -> 22.84; 3000 (P-MID) 22.57 ->
-22.55, tensorf-vm at TV 6 22.45 -> 22.34. A quarter (4 / 12) lost at 800 (22.33, 22.55, one seed). Fewer
-channels to filter, sample and decode make every step cheaper (interleaved A/B of fourierf-vm at 800 iterations, 2
-pairs: 0.89x the run's time, 0.86x a step's; BENCHMARKS.md). Forward-facing scenes keep
-TensoRF's LLFF counts: half lost on fern (800 iterations, one seed: fourierf-vm 20.24 -> 20.02, tensorf-vm 19.50 ->
-18.60)."""
+22.55, tensorf-vm at TV 6 22.45 -> 22.34. A quarter (4 / 12) lost at 800 (22.33, 22.55, one seed). A run
+takes less time (two interleaved A/Bs of fourierf-vm at 800 iterations, 2 pairs each: 0.89x and 0.87x the run's time;
+a step at the end of the run 0.86x and 1.05x in-process, so not reliably cheaper there; BENCHMARKS.md).
+Forward-facing scenes keep TensoRF's LLFF counts: half lost on fern (800 iterations, one seed: fourierf-vm
+20.24 -> 20.02, tensorf-vm 19.50 -> 18.60)."""
 
 OBJECT_COMPONENTS_FROM = 800
 """Object runs this long or longer get ``OBJECT_COMPONENTS``; shorter ones keep TensoRF's counts. Fewer components

@@ -160,6 +160,8 @@ FNM_FROM = "--pipeline.model.floaters-gradient-scaling-from"
 IN_BAND = ["--pipeline.model.fourier.init-in-band", "True"]
 LATE_ALPHA_MASK = ["--pipeline.model.occupancy-update-fractions", "0.3", "0.5"]
 """The occupancy grid's two updates at 30 % and 50 % of the run (the object default: 20 % and 40 %)."""
+OCCUPANCY_AT_STEP_200 = ["--pipeline.model.occupancy-update-fractions", "0.25"]
+"""A forward-facing run's one occupancy update at 25 % of 800 iterations, step 200 (the real preset: 10 %, step 80)."""
 EARLY_FINAL_GRID = ["--pipeline.model.field.upsample-fractions", "0.01"]
 """One upsample at 1 % of the run: the field holds the final grid from step 8 (at 800 iterations) on."""
 RULE_LEGO = [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.04"]
@@ -195,6 +197,14 @@ def components(density: int, appearance: int) -> list[str]:
     return [
         "--pipeline.model.field.density-components", *[str(density)] * 3,
         "--pipeline.model.field.appearance-components", *[str(appearance)] * 3,
+    ]  # fmt: skip
+
+
+def grid(init_side: int, final_side: int) -> list[str]:
+    """The initial and final grid (later flags win over the protocol's own sizes)."""
+    return [
+        "--pipeline.model.field.n-voxels-init", str(init_side**3),
+        "--pipeline.model.field.n-voxels-final", str(final_side**3),
     ]  # fmt: skip
 
 
@@ -297,6 +307,12 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # update (20 % of the run, the step the band opens fully) pruning cells the band-limited field has not filled?
         "wd0-nodecay-lr0.04-tv4-f0.05-alphamask0.3": [*LEGO_TV4, *first_band("0.05"), *LATE_ALPHA_MASK],
         "wd0-nodecay-lr0.04-tv4-alphamask0.3": [*LEGO_TV4, *LATE_ALPHA_MASK],
+        # Session 28: the regime the paper says the curriculum is for, a grid finer than the images need (P-CPU's
+        # 100x100 views on 96³ -> 192³ and 128³ -> 256³ instead of 64³ -> 128³), where TensoRF should overfit first.
+        **{
+            f"wd0-nodecay-lr0.04-tv4-comp8-g{final}": [*LEGO_TV4, *components(8, 24), *grid(final // 2, final)]
+            for final in (192, 256)
+        },
     },
     # Forward-facing scenes: the real-scene preset (the trainer applies it), its grid lr, the occlusion term, f0/Δ,
     # Floaters-No-More gradient scaling.
@@ -364,6 +380,18 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # Session 26: half TensoRF's component counts (lego's object rule gained 0.14 dB over 3 seeds at P-CPU) on
         # fourierf-vm's P-CPU choice.
         "lr0.08-tvconst-tv4-comp8": [*FERN_TV4, *components(8, 24)],
+        # Session 28: Floaters-No-More lifts tensorf-vm past fourierf-vm (P-CPU val 20.69 against 20.05) but not
+        # fourierf-vm, whose narrow band holds the near leaves back while FNM slows them too: FNM with a band that
+        # opens early (by 5-25 % of the run) or starts wider.
+        **{f"lr0.08-tvconst-tv4-fnm-ramp{r}": [*FERN_TV4, *FNM, RAMP, r] for r in ("0.05", "0.1", "0.25")},
+        "lr0.08-tvconst-tv4-fnm-f0.3-ramp0.1": [*FERN_TV4, *FNM, *first_band("0.3"), RAMP, "0.1"],
+        # Session 28: seeds 1 and 2 of fnm-ramp0.1 stalled at train PSNR ~17 with 19 % and 33 % of the occupancy grid
+        # kept (69 % on seed 20211202): is it the single occupancy update at 10 % (step 80) pruning a field not yet lit?
+        "lr0.08-tvconst-tv4-fnm-ramp0.1-alphamask0.25": [*FERN_TV4, *FNM, RAMP, "0.1", *OCCUPANCY_AT_STEP_200],
+        # ... and the same later update on each method's P-CPU choice: what does it cost where the update at step 80
+        # did not prune a dim field? (The budget rule's since session 28.)
+        "lr0.08-tvconst-tv4-alphamask0.25": [*FERN_TV4, *OCCUPANCY_AT_STEP_200],
+        "lr0.08-tvconst-tv4-fnm-alphamask0.25": [*FERN_TV4, *FNM, *OCCUPANCY_AT_STEP_200],
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband")

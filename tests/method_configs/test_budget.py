@@ -14,6 +14,8 @@ from fourierf_plugin.method_configs.budget import (
     OBJECT_COMPONENTS_FROM,
     OBJECT_TV_WEIGHT,
     PAPER_ITERATIONS,
+    REAL_OCCUPANCY_FROM,
+    REAL_OCCUPANCY_STEP,
     REAL_RAMP_ITERATIONS,
     REAL_REVIVE_AT_ONCE_ABOVE,
     REAL_TV_WEIGHT,
@@ -52,8 +54,10 @@ def test_rule_is_a_function_of_the_iteration_count() -> None:
     assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS) == {}
     real = {"optimizer.lr_grids": 0.08, "pipeline.model.tv_decay_ratio": 1.0}
     real |= {"pipeline.model.tv_weight_density": REAL_TV_WEIGHT, "pipeline.model.tv_weight_appearance": REAL_TV_WEIGHT}
-    assert short_run_settings("fourierf-vm", "real", 800) == real
-    assert short_run_settings("tensorf-vm", "real", 800) == real, "forward-facing: the same rule, masks off"
+    real_800 = real | {"pipeline.model.occupancy_update_fractions": (0.25,)}
+    assert short_run_settings("fourierf-vm", "real", 800) == real_800
+    assert short_run_settings("tensorf-vm", "real", 800) == real_800, "forward-facing: the same rule, masks off"
+    assert short_run_settings("fourierf-vm", "real", REAL_OCCUPANCY_FROM - 1) == real, "shorter: the preset's 10 %"
     ramp = "pipeline.model.fourier.ramp_fraction"
     assert short_run_settings("fourierf-vm", "real", 3000)[ramp] == 0.2667, "the band opens by step 800"
     assert round(0.2667 * 3000) == REAL_RAMP_ITERATIONS
@@ -171,3 +175,21 @@ def test_a_longer_forward_facing_run_revives_a_dark_density_field_at_once(llff_s
     assert mine.pipeline.model.field.revive_patience == 4, "a flag wins"
     paper, _ = finished("fourierf-vm", llff_scene, "--max-num-iterations", str(PAPER_ITERATIONS))
     assert paper.pipeline.model.field.revive_patience == field_default
+
+
+def test_a_forward_facing_runs_occupancy_update_waits_for_step_200(llff_scene: Path) -> None:
+    occupancy = "pipeline.model.occupancy_update_fractions"
+    for iterations in (REAL_OCCUPANCY_FROM, 1500, 1999):
+        (fraction,) = short_run_settings("fourierf-vm", "real", iterations)[occupancy]
+        assert round(fraction * iterations) == REAL_OCCUPANCY_STEP, iterations
+    assert occupancy not in short_run_settings("fourierf-vm", "real", 2000), "10 % is step 200 already"
+    assert occupancy not in short_run_settings("fourierf-vm", "synthetic", 800), "objects keep 20 % and 40 %"
+    config, notes = finished("tensorf-vm", llff_scene, "--max-num-iterations", "800")
+    assert config.pipeline.model.occupancy_update_fractions == (0.25,), "the real-scene preset's 10 % is not a user's"
+    assert any(n.startswith("budget rule") and "occupancy_update_fractions=(0.25,)" in n for n in notes)
+    mine, _ = finished(
+        "fourierf-vm", llff_scene, "--max-num-iterations", "800", "--pipeline.model.occupancy-update-fractions", "0.1"
+    )
+    assert mine.pipeline.model.occupancy_update_fractions == (0.1,), "a flag wins, even the preset's own value"
+    paper, _ = finished("fourierf-vm-paper", llff_scene, "--max-num-iterations", "800")
+    assert paper.pipeline.model.occupancy_update_fractions == (0.1,)

@@ -363,7 +363,7 @@ class FourieRFModel(nn.Module):
         if step in self.occupancy_steps:
             self.prepare(step + 1)
             first = step == self.occupancy_steps[0]
-            self._update_occupancy(shrink=first)
+            self._update_occupancy(shrink=first, step=step)
             structure_changed = True
             # Ray filtering needs metric rays through a box; NDC rays all cross the frustum (TensoRF skips it too).
             second = len(self.occupancy_steps) > 1 and step == self.occupancy_steps[1]
@@ -391,7 +391,7 @@ class FourieRFModel(nn.Module):
                 alpha[i : i + chunk][keep] = -torch.expm1(-sigma * step)
         return alpha.view(*reso)
 
-    def _update_occupancy(self, shrink: bool) -> None:
+    def _update_occupancy(self, shrink: bool, step: int) -> None:
         reso = self.field.resolution
         vertices = occupancy_from_alpha(self._dense_alpha(reso), self.config.occupancy_threshold)
         box = occupied_aabb(vertices, self.aabb)
@@ -402,6 +402,10 @@ class FourieRFModel(nn.Module):
             )
             return
         self.occupancy.set(vertices, self.aabb)
+        # Said at every update because what it prunes is never sampled again: a run that stalls after an update that
+        # kept little of a forward-facing scene's grid was pruned while still dark (README, budget rule).
+        kept = self.occupancy.cells.float().mean().item()
+        get_console().print(f"occupancy update after step {step}: {kept:.0%} of the grid kept")
         if shrink:
             self.field.crop(*shrink_bounds(box, self.aabb, reso))
 

@@ -280,10 +280,22 @@ def test_segments_skip_unoccupied_cells_like_the_full_march() -> None:
     for model in models:
         with torch.no_grad():
             model.prepare(10)
-            model._update_occupancy(shrink=False)
+            model._update_occupancy(shrink=False, step=10)
         assert model.occupancy.active and not bool(model.occupancy.cells.all())
         counts.append(count_density_queries(model))
     full, early = (m.render_rays(origins, directions, step=10) for m in models)
     for key in ("rgb", "accumulation", "depth"):
         torch.testing.assert_close(early[key], full[key], atol=2e-4, rtol=0)
     assert sum(counts[1]) == sum(counts[0])  # the slab is not opaque: the same occupied samples, in segments
+
+
+def test_an_occupancy_update_says_how_much_of_the_grid_it_kept(capsys: pytest.CaptureFixture[str]) -> None:
+    """What an update prunes is never sampled again, so the log says what it kept (a run pruned while still dark
+    shows it there)."""
+    model = slab(0.05)
+    with torch.no_grad():
+        model.prepare(10)
+        model._update_occupancy(shrink=False, step=10)
+    kept = model.occupancy.cells.float().mean().item()
+    assert 0 < kept < 1
+    assert f"occupancy update after step 10: {kept:.0%} of the grid kept" in capsys.readouterr().out

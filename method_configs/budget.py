@@ -159,22 +159,16 @@ def object_components(scene_preset: str, iterations: int) -> dict[str, Any]:
 
 def short_run_settings(method: str, scene_preset: str, iterations: int) -> dict[str, Any]:
     """What the budget rule sets for a run of ``iterations`` of ``method`` under ``scene_preset``."""
-    if iterations >= PAPER_ITERATIONS:
+    if iterations >= PAPER_ITERATIONS or (method, scene_preset) not in SHORT_RUN_SETTINGS:
         return {}
-    settings = dict(SHORT_RUN_SETTINGS.get((method, scene_preset), {}))
-    if (method, scene_preset) in SHORT_RUN_SETTINGS:
-        settings |= object_components(scene_preset, iterations)
-    ramp = ramp_fraction(scene_preset, iterations) if method == "fourierf-vm" else None
-    if ramp is not None:
-        settings["pipeline.model.fourier.ramp_fraction"] = ramp
-    ruled = (method, scene_preset) in SHORT_RUN_SETTINGS
-    patience = revive_patience(scene_preset, iterations) if ruled else None
-    if patience is not None:
-        settings["pipeline.model.field.revive_patience"] = patience
-    occupancy = occupancy_update_fractions(scene_preset, iterations) if ruled else None
-    if occupancy is not None:
-        settings["pipeline.model.occupancy_update_fractions"] = occupancy
-    return settings
+    settings = SHORT_RUN_SETTINGS[(method, scene_preset)] | object_components(scene_preset, iterations)
+    fourierf = method == "fourierf-vm"
+    by_step = {
+        "pipeline.model.fourier.ramp_fraction": ramp_fraction(scene_preset, iterations) if fourierf else None,
+        "pipeline.model.field.revive_patience": revive_patience(scene_preset, iterations),
+        "pipeline.model.occupancy_update_fractions": occupancy_update_fractions(scene_preset, iterations),
+    }
+    return settings | {path: value for path, value in by_step.items() if value is not None}
 
 
 def apply_budget_rule(

@@ -73,3 +73,20 @@ def test_each_side_is_named_by_its_commit(ab_speed: ModuleType) -> None:
     assert ab_speed.revision_label("HEAD") == f"HEAD ({head})"
     assert ab_speed.revision_label(head) == head
     assert ab_speed.revision_label(None).startswith(f"the working tree on {head}")
+
+
+def test_each_scene_reports_into_its_own_section(ab_speed: ModuleType, tmp_path: Path) -> None:
+    (tmp_path / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in _rows()))
+    (tmp_path / "iterations.json").write_text(json.dumps({"old": [0.2], "new": [0.1]}))
+    lego, fern = ab_speed.SCENES["lego"], ab_speed.SCENES["fern"]
+    markdown = tmp_path / "BENCHMARKS.md"
+    markdown.write_text(f"{lego.begin}\nlego A/B\n{lego.end}\n{fern.begin}\nfern A/B\n{fern.end}\n")
+    (tmp_path / "meta.json").write_text(json.dumps(META | {"scene": "fern"}))
+    ab_speed.write_report(tmp_path, markdown)
+    text = markdown.read_text()
+    assert "lego A/B" in text and "fern A/B" not in text and fern.title in text
+    (tmp_path / "meta.json").write_text(json.dumps(META))  # a record from before --scene: lego's
+    ab_speed.write_report(tmp_path, markdown)
+    text = markdown.read_text()
+    assert "lego A/B" not in text and lego.title in text and fern.title in text
+    assert (lego.begin, lego.end) == (ab_speed.BEGIN, ab_speed.END), "the lego section keeps its markers"

@@ -176,15 +176,20 @@ def check_final_cutoff(fourier: Any) -> None:
             )
 
 
-def check_init_in_band(fourier: Any) -> None:
-    """Starting inside the f0 band means nothing without a band: refuse it rather than ignore it."""
-    if fourier.init_in_band and not fourier.enabled:
-        flag = flag_of(f"{_MODEL}.fourier.init_in_band")
-        fail(
-            f"{flag} True needs the Fourier curriculum, which is off in this run (a tensorf-* preset or "
-            f"{flag_of(f'{_MODEL}.fourier.enabled')} False): there is no band to start in",
-            f"drop {flag}, or train a fourierf-* preset",
-        )
+BAND_OPTIONS = (("init_in_band", True, "there is no band to start in"), ("boundary", "mirror", "nothing is filtered"))
+"""Options of the band itself: (field, the value that needs a band, why it would mean nothing without one)."""
+
+
+def check_band_options(fourier: Any) -> None:
+    """An option of the band means nothing without a band: refuse it rather than ignore it."""
+    for name, value, why in BAND_OPTIONS:
+        if getattr(fourier, name) == value and not fourier.enabled:
+            flag = flag_of(f"{_MODEL}.fourier.{name}")
+            fail(
+                f"{flag} {_show(value)} needs the Fourier curriculum, which is off in this run (a tensorf-* preset or "
+                f"{flag_of(f'{_MODEL}.fourier.enabled')} False): {why}",
+                f"drop {flag}, or train a fourierf-* preset",
+            )
 
 
 def check_floaters_start(model: Any) -> None:
@@ -212,7 +217,7 @@ def check_training_options(config: Any) -> None:
             fail(f"{flag} {_show(value)} is out of range: it must be {rule.needs}", f"pass e.g. {flag} {rule.example}")
     check_zerorf_options(config)
     check_final_cutoff(config.pipeline.model.fourier)
-    check_init_in_band(config.pipeline.model.fourier)
+    check_band_options(config.pipeline.model.fourier)
     check_floaters_start(config.pipeline.model)
     iters = config.max_num_iterations
     if not (_integer(iters) and iters >= 1):

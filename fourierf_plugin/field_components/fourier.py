@@ -14,7 +14,9 @@ Semantics follow the official code, which uses different cutoff conventions for 
   code adds ``1e-6`` everywhere (``leakage``); the paper zeroes out-of-band coefficients (``leakage = 0``).
 
 Both filters are circular: energy leaks across opposite faces of the AABB (an impulse on one border shows up on the
-other). That is what the method does, so it is kept and documented rather than padded away.
+other). That is what the method does, so it is the default. ``mirrored`` runs either filter on the factor's mirror
+image appended to it (a DCT-style low-pass at the same cutoff in cycles per box), so nothing wraps: in NDC the far
+wall at z = 1 no longer shows up at the near plane z = -1 while the band is narrow.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ __all__ = [
     "kept_fraction_planes",
     "line_mask",
     "line_weights",
+    "mirrored",
     "plane_is_full",
     "plane_mask",
     "signed_frequencies",
@@ -170,6 +173,26 @@ def kept_fraction_lines(length: int, f: float) -> float:
         paired = k != 0 and not (length % 2 == 0 and k == length // 2)
         total += w * (2.0 if paired else 1.0)
     return total / length
+
+
+# ------------------------------------------------------------------------------------------------ mirror boundary
+def mirrored(low_pass, x: Tensor, f: float, ndims: int, *args) -> Tensor:
+    """``low_pass(x, f, *args)`` with mirror boundaries over the last ``ndims`` dims instead of periodic ones.
+
+    Each of those dims is extended by its reversed copy (``x0 .. x_{L-1}, x_{L-1} .. x0``), the extension is filtered
+    at the same ``f`` (the masks scale with length, so the cutoff in cycles per box is unchanged) and cropped back.
+    The extension is even and periodic, so it has no jump at the faces and nothing leaks across the box. The filter
+    stays linear and self-adjoint (the mask is symmetric), and ``f = 1`` is still the identity.
+    """
+    if check_cutoff(f) >= 1.0:
+        return low_pass(x, f, *args)
+    sizes = x.shape[x.dim() - ndims :]
+    for dim in range(-ndims, 0):
+        x = torch.cat([x, x.flip(dim)], dim=dim)
+    out = low_pass(x, f, *args)
+    for dim, size in zip(range(-ndims, 0), sizes, strict=True):
+        out = out.narrow(dim, 0, size)
+    return out
 
 
 # ----------------------------------------------------------------------------------------------------------- planes

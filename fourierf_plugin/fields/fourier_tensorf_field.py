@@ -78,10 +78,10 @@ class FourierTensoRFField(PreparedField):
         ops: GridOps | None = None,
         plane_leakage: float = 0.0,
         app_planes_follow_density: bool = False,
+        mirror_boundary: bool = False,
     ) -> None:
-        super().__init__(aabb, ops)
+        super().__init__(aabb, ops, plane_leakage, mirror_boundary)
         self.config = config
-        self.plane_leakage = float(plane_leakage)
         self.app_planes_follow_density = app_planes_follow_density
         grid_cls = TensorVM if config.decomposition == "vm" else TensorCP
         init = config.init_scale if config.init_scale is not None else (0.1 if config.decomposition == "vm" else 0.2)
@@ -101,8 +101,8 @@ class FourierTensoRFField(PreparedField):
         rendering = not torch.is_grad_enabled()
 
         def low_pass(grid: TensorGrid, f_planes: float, f_lines: float) -> FilteredFactors:
-            planes = [self.ops.filter_planes(p, f_planes, self.plane_leakage) for p in grid.planes]
-            return FilteredFactors(planes, [self.ops.filter_lines(x, f_lines) for x in grid.lines], rendering)
+            planes = [self.low_pass_planes(p, f_planes) for p in grid.planes]
+            return FilteredFactors(planes, [self.low_pass_lines(x, f_lines) for x in grid.lines], rendering)
 
         return FilteredGrids(
             low_pass(self.density_grid, f_density, f_density),

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor, nn
 
+from fourierf_plugin.field_components import fourier
 from fourierf_plugin.fields.grid_ops import FilteredFactors, GridOps
 
 
@@ -37,9 +38,13 @@ class PreparedField(nn.Module):
     replaces_parameters: bool = True
     """Whether ``crop``/``upsample`` swap in new parameter tensors (the optimiser must then be rebuilt)."""
 
-    def __init__(self, aabb: Tensor, ops: GridOps | None) -> None:
+    def __init__(
+        self, aabb: Tensor, ops: GridOps | None, plane_leakage: float = 0.0, mirror_boundary: bool = False
+    ) -> None:
         super().__init__()
         self.ops = ops if ops is not None else GridOps()
+        self.plane_leakage = float(plane_leakage)
+        self.mirror_boundary = mirror_boundary
         self.register_buffer("aabb", aabb.detach().clone().float())
         self._filtered: FilteredGrids | None = None
         self._render_key: tuple | None = None
@@ -68,6 +73,21 @@ class PreparedField(nn.Module):
 
     def param_groups(self) -> dict[str, list[nn.Parameter]]:
         raise NotImplementedError
+
+    # -- the low-pass -----------------------------------------------------------------------------------------------
+    def low_pass_planes(self, planes: Tensor, f: float) -> Tensor:
+        """[..., H, W] planes at cutoff ``f``, with the field's plane leakage and boundary (periodic or mirror)."""
+        if self.mirror_boundary:
+            return fourier.mirrored(self.ops.filter_planes, planes, f, 2, self.plane_leakage)
+        return self.ops.filter_planes(planes, f, self.plane_leakage)
+
+    def low_pass_lines(self, lines: Tensor, f: float) -> Tensor:
+        """[..., L] lines at cutoff ``f``, with the field's boundary (periodic or mirror)."""
+        return (
+            fourier.mirrored(self.ops.filter_lines, lines, f, 1)
+            if self.mirror_boundary
+            else self.ops.filter_lines(lines, f)
+        )
 
     # -- preparation ----------------------------------------------------------------------------------------------
     def prepare(self, f_density: float, f_color: float) -> None:

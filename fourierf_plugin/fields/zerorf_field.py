@@ -64,11 +64,11 @@ class ZeroRFField(PreparedField):
         generator: torch.Generator,
         ops: GridOps | None = None,
         plane_leakage: float = 0.0,
+        mirror_boundary: bool = False,
     ) -> None:
         """``reso``: the grid at the start; ``final_reso``: the finest grid of the run (it sizes the canvas)."""
-        super().__init__(aabb, ops)
+        super().__init__(aabb, ops, plane_leakage, mirror_boundary)
         self.config = config
-        self.plane_leakage = float(plane_leakage)
         zerorf = config.zerorf
         self.grid: GeneratedVM = zerorf.setup(canvas_box=aabb, reso=reso, final_reso=final_reso, generator=generator)
         self.decoder = ZeroRFDecoder(3 * zerorf.feature_channels, zerorf.decoder_width, view_dependent, generator)
@@ -78,8 +78,8 @@ class ZeroRFField(PreparedField):
         """The generators' factors over the current box, low-passed at the density cutoff (one grid serves both)."""
         planes, lines = self.grid.factors(self.aabb)
         shared = FilteredFactors(
-            [self.ops.filter_planes(p, f_density, self.plane_leakage) for p in planes],
-            [self.ops.filter_lines(x, f_density) for x in lines],
+            [self.low_pass_planes(p, f_density) for p in planes],
+            [self.low_pass_lines(x, f_density) for x in lines],
             rendering=not torch.is_grad_enabled(),
         )
         return FilteredGrids(shared, shared, (f_density, f_color))

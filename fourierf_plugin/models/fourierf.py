@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import torch
 from torch import Tensor, nn
@@ -74,6 +74,10 @@ class FourierConfig:
     code keep it: it shows up as the band opens, multiplied by partners trained in the meantime)."""
     plane_leakage: float = 0.0
     """Weight kept on out-of-band plane coefficients; the paper zeroes them, the official code keeps 1e-6."""
+    boundary: Literal["periodic", "mirror"] = "periodic"
+    """How the filters treat the box's faces: periodic (the paper and the official code: what lies at one face leaks
+    to the opposite one while the band is narrow, e.g. NDC's far wall onto the near plane) or mirror (each factor
+    filtered with its mirror image appended, so nothing wraps)."""
     app_planes_follow_density: bool = False
     """Official-code behaviour: appearance planes use the density cutoff instead of the colour cutoff."""
 
@@ -152,8 +156,8 @@ class FourieRFModel(nn.Module):
         ops = build_ops(config.accel, device)
         if fc.zerorf.enabled:
             final = schedules.n_to_reso(max([fc.n_voxels_init, *self.voxel_targets]), size)
-            leakage = config.fourier.plane_leakage
-            return ZeroRFField(fc, scene_box, reso, final, effects.view_dependent, generator, ops, leakage)
+            leakage, mirror = config.fourier.plane_leakage, config.fourier.boundary == "mirror"
+            return ZeroRFField(fc, scene_box, reso, final, effects.view_dependent, generator, ops, leakage, mirror)
         return FourierTensoRFField(
             fc,
             scene_box,
@@ -163,6 +167,7 @@ class FourieRFModel(nn.Module):
             ops=ops,
             plane_leakage=config.fourier.plane_leakage,
             app_planes_follow_density=config.fourier.app_planes_follow_density,
+            mirror_boundary=config.fourier.boundary == "mirror",
         )
 
     # -- schedules (pure functions of the step) ---------------------------------------------------------------

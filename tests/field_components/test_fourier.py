@@ -23,6 +23,7 @@ from fourierf_plugin.field_components.fourier import (
     kept_fraction_lines,
     kept_fraction_planes,
     line_mask,
+    mirrored,
     plane_mask,
 )
 
@@ -230,6 +231,46 @@ def test_plane_filter_wraps_periodically() -> None:
     out = filter_planes(plane, 0.3)
     assert out[-1, 5] == pytest.approx(float(out[1, 5]), abs=1e-12)
     assert abs(float(out[-1, 5])) > 1e-3
+
+
+# --------------------------------------------------------------------------------------------- mirror boundary
+def test_mirror_boundary_does_not_wrap() -> None:
+    # The periodic filter puts an impulse on one face onto the opposite one; the mirror one keeps it on its side.
+    x = torch.zeros(32, dtype=torch.float64)
+    x[0] = 1.0
+    out = mirrored(filter_lines, x, 0.3, 1)
+    assert abs(float(out[-1])) < 0.1 * abs(float(filter_lines(x, 0.3)[-1]))
+    assert float(out[0]) > float(filter_lines(x, 0.3)[0])  # the impulse's mass stays at its own face
+    plane = torch.zeros(16, 16, dtype=torch.float64)
+    plane[0, 5] = 1.0
+    out = mirrored(filter_planes, plane, 0.3, 2, 0.0)
+    assert abs(float(out[-1, 5])) < 0.1 * abs(float(filter_planes(plane, 0.3)[-1, 5]))
+
+
+def test_mirror_boundary_identity_at_f1_and_mean_at_f0() -> None:
+    lines, planes = _rand(3, 17), _rand(2, 6, 9, seed=1)
+    assert mirrored(filter_lines, lines, 1.0, 1) is lines
+    torch.testing.assert_close(mirrored(filter_planes, planes, 1.0, 2, 0.0), planes)
+    torch.testing.assert_close(
+        mirrored(filter_lines, lines, 0.0, 1), lines.mean(dim=-1, keepdim=True).expand_as(lines), atol=1e-12, rtol=0
+    )
+    mean = planes.mean(dim=(-2, -1), keepdim=True).expand_as(planes)
+    torch.testing.assert_close(mirrored(filter_planes, planes, 0.0, 2, 0.0), mean, atol=1e-12, rtol=0)
+
+
+@pytest.mark.parametrize(("height", "width"), [(8, 8), (7, 10)])
+def test_mirror_boundary_is_self_adjoint_and_keeps_constants(height: int, width: int) -> None:
+    # Self-adjoint, so the fast filters' backward (the same filter on the gradient) stays exact under mirroring.
+    x, y = _rand(2, height, width, seed=2), _rand(2, height, width, seed=3)
+    filt = lambda p: mirrored(filter_planes, p, 0.35, 2, 0.0)  # noqa: E731
+    assert float((filt(x) * y).sum()) == pytest.approx(float((x * filt(y)).sum()), abs=1e-10)
+    ones = torch.ones(height, width, dtype=torch.float64)
+    torch.testing.assert_close(filt(ones), ones)
+    line = _rand(1, 2, height, seed=4)
+    line_filt = lambda v: mirrored(filter_lines, v, 0.35, 1)  # noqa: E731
+    assert float((line_filt(line) * line.flip(-1)).sum()) == pytest.approx(
+        float((line * line_filt(line.flip(-1))).sum()), abs=1e-10
+    )
 
 
 # ------------------------------------------------------------------------------------------------ shared checks

@@ -14,6 +14,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
+from fourierf_plugin.field_components import fourier
 from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig, FourierTensoRFField
 from fourierf_plugin.fields.grid_ops import GridOps
 
@@ -201,6 +202,18 @@ def test_app_planes_follow_density_cutoff() -> None:
     plain = small_field()  # without the option the appearance planes take the colour cutoff
     g = plain.filter(0.0, 1.0)
     assert all(a is b for a, b in zip(g.appearance.planes, plain.appearance_grid.planes, strict=True))
+
+
+def test_mirror_boundary_filters_each_factor_with_its_mirror_image() -> None:
+    field = small_field(field_kw={"mirror_boundary": True})
+    g = field.filter(0.4, 0.0)
+    for p, raw in zip(g.density.planes, field.density_grid.planes, strict=True):
+        torch.testing.assert_close(p, fourier.mirrored(fourier.filter_planes, raw, 0.4, 2, 0.0))
+        assert not torch.allclose(p, fourier.filter_planes(raw, 0.4))  # not the periodic filter
+    for line in g.appearance.lines:  # f = 0: the mean under either boundary
+        torch.testing.assert_close(line, line.mean(dim=-1, keepdim=True).expand_as(line), atol=1e-6, rtol=0)
+    g = field.filter(1.0, 1.0)  # the band open: the raw factors themselves, as without mirroring
+    assert all(a is b for a, b in zip(g.density.lines, field.density_grid.lines, strict=True))
 
 
 def test_filtered_grids_carry_gradients_to_raw_parameters() -> None:

@@ -307,6 +307,11 @@ CASES: dict[str, Case] = {
         train_with(f"{MODEL}.fourier.init-in-band", "True", f"{MODEL}.fourier.enabled", "False"),
         ("init-in-band True", "curriculum", "off", "drop"),
     ),
+    "train: mirror boundaries of a band that is off": Case(
+        "train",
+        train_with(f"{MODEL}.fourier.boundary", "mirror", f"{MODEL}.fourier.enabled", "False"),
+        ("boundary mirror", "curriculum", "off", "nothing is filtered", "drop"),
+    ),
     "train: final cutoff 0": Case("train", train_with(f"{MODEL}.fourier.f-final", "0"), ("f-final 0", "(0, 1]")),
     "train: negative ramp": Case("train", train_with(f"{MODEL}.fourier.ramp-fraction", "-1"), ("ramp-fraction -1",)),
     "train: negative plane leakage": Case(

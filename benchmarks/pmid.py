@@ -105,6 +105,18 @@ GRIDS = (
         "patches of far depth over the ceiling and the wall at the top left. The curriculum and Floaters-No-More both "
         "keep fern from ghosting at this scale; the gradient scaling does it without blurring.",
     ),
+    Grid(
+        "docs/fern_grid_boundary.png",
+        "P-CPU runs of session 29, seed 20211202: fourierf-vm on the forward-facing rule `lr0.08-tvconst-tv4-"
+        "alphamask0.25` (val / test 20.08 / 19.47), the same with mirror boundaries `...-mirror` (20.15 / 19.68), and "
+        "tensorf-vm with Floaters-No-More `lr0.08-tvconst-tv4-fnm-alphamask0.25` (20.39 / 19.73)",
+        ("fourierf-vm", "fourierf-vm mirror", "tensorf-vm + FNM"),
+        "all three are opaque everywhere. With periodic filters fourierf-vm holds a near blob at the foot of the "
+        "planter (dark, both views); with mirror boundaries this seed has none, and the bottom rows are as smooth as "
+        "tensorf-vm's with Floaters-No-More. The blob is not the wrap alone: on seeds 1 and 2 (val views) the mirror "
+        "runs keep a smaller one. Mirror boundaries add a few near spots at the top edge and leave the rest alike: "
+        "the plant one smooth layer, the wall at the right far, the renders softer than tensorf-vm's.",
+    ),
 )
 
 SEEDS = (20211202, 1, 2)
@@ -160,6 +172,7 @@ FNM_FROM = "--pipeline.model.floaters-gradient-scaling-from"
 IN_BAND = ["--pipeline.model.fourier.init-in-band", "True"]
 LATE_ALPHA_MASK = ["--pipeline.model.occupancy-update-fractions", "0.3", "0.5"]
 """The occupancy grid's two updates at 30 % and 50 % of the run (the object default: 20 % and 40 %)."""
+MIRROR = ["--pipeline.model.fourier.boundary", "mirror"]
 OCCUPANCY_AT_STEP_200 = ["--pipeline.model.occupancy-update-fractions", "0.25"]
 """A forward-facing run's one occupancy update at 25 % of 800 iterations, step 200 (the real preset: 10 %, step 80)."""
 EARLY_FINAL_GRID = ["--pipeline.model.field.upsample-fractions", "0.01"]
@@ -303,6 +316,10 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # Session 27: P-CPU's val choice lost 0.8 dB at 1500 iterations; does the initial noise waiting outside its
         # narrow first band (weight decay 0 keeps it) explain it?
         "wd0-nodecay-lr0.04-tv4-comp8-f0.05-inband": [*LEGO_TV4, *components(8, 24), *first_band("0.05"), *IN_BAND],
+        # Session 29: mirror boundaries (nothing wraps across the box's faces while the band is narrow), on the rule
+        # and with the narrow first band.
+        "wd0-nodecay-lr0.04-tv4-comp8-mirror": [*LEGO_TV4, *components(8, 24), *MIRROR],
+        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-mirror": [*LEGO_TV4, *components(8, 24), *first_band("0.05"), *MIRROR],
         # Session 27: the narrow first band's renders at 1500 show holes in the body: is it the occupancy grid's first
         # update (20 % of the run, the step the band opens fully) pruning cells the band-limited field has not filled?
         "wd0-nodecay-lr0.04-tv4-f0.05-alphamask0.3": [*LEGO_TV4, *first_band("0.05"), *LATE_ALPHA_MASK],
@@ -392,9 +409,18 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # did not prune a dim field? (The budget rule's since session 28.)
         "lr0.08-tvconst-tv4-alphamask0.25": [*FERN_TV4, *OCCUPANCY_AT_STEP_200],
         "lr0.08-tvconst-tv4-fnm-alphamask0.25": [*FERN_TV4, *FNM, *OCCUPANCY_AT_STEP_200],
+        # Session 29: the filters' periodic wrap puts NDC's far wall (z = 1) onto the near plane (z = -1) while the
+        # band is narrow, where fourierf-vm shows a near blob tensorf-vm lacks: mirror boundaries instead, with and
+        # without Floaters-No-More.
+        "lr0.08-tvconst-tv4-alphamask0.25-mirror": [*FERN_TV4, *OCCUPANCY_AT_STEP_200, *MIRROR],
+        "lr0.08-tvconst-tv4-fnm-alphamask0.25-mirror": [*FERN_TV4, *FNM, *OCCUPANCY_AT_STEP_200, *MIRROR],
+        # Session 29: fourierf-vm's fern renders are softer than tensorf-vm's with Floaters-No-More: the curriculum on
+        # the geometry alone (the appearance grids unfiltered from step 0), with and without FNM.
+        "lr0.08-tvconst-tv4-alphamask0.25-f0c1": [*FERN_TV4, *OCCUPANCY_AT_STEP_200, F0_COLOR, "1.0"],
+        "lr0.08-tvconst-tv4-fnm-alphamask0.25-f0c1": [*FERN_TV4, *FNM, *OCCUPANCY_AT_STEP_200, F0_COLOR, "1.0"],
     },
 }  # fmt: skip
-CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband")
+CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband", "mirror")
 """Settings that only change the curriculum: tensorf-vm (masks off) would repeat its run, so it skips them."""
 
 

@@ -113,9 +113,11 @@ GRIDS = (
         ("fourierf-vm", "fourierf-vm mirror", "tensorf-vm + FNM"),
         "all three are opaque everywhere. With periodic filters fourierf-vm holds a near blob at the foot of the "
         "planter (dark, both views); with mirror boundaries this seed has none, and the bottom rows are as smooth as "
-        "tensorf-vm's with Floaters-No-More. The blob is not the wrap alone: on seeds 1 and 2 (val views) the mirror "
-        "runs keep a smaller one. Mirror boundaries add a few near spots at the top edge and leave the rest alike: "
-        "the plant one smooth layer, the wall at the right far, the renders softer than tensorf-vm's.",
+        "tensorf-vm's with Floaters-No-More. The wrap does not put it there: on every periodic seed it sits inside "
+        "the box, at NDC (-0.48, -0.80, -0.34) (the nearest point of test view 0's lower left), far from every face, "
+        "and the mirror runs of seeds 1 and 2 keep it (nearest depth 0.36 and 0.33 against 0.33 periodic; 0.46 on "
+        "this seed, 0.43 for tensorf-vm with FNM). Mirror boundaries add a few near spots at the top edge and leave "
+        "the rest alike: the plant one smooth layer, the wall at the right far, the renders softer than tensorf-vm's.",
     ),
 )
 

@@ -23,6 +23,7 @@ import torch
 from fourierf_plugin.engine.loading import load_run
 from fourierf_plugin.method_configs import config_registry
 from fourierf_plugin.pipelines.base import Pipeline
+from fourierf_plugin.scripts.cli import run_cli
 
 
 @dataclass(frozen=True)
@@ -58,12 +59,12 @@ def probe(pipeline: Pipeline, step: int, point: torch.Tensor, split: str = "trai
     return sightings
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--run", type=Path, required=True, help="config.json of the run")
     ap.add_argument("--point", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"))
     ap.add_argument("--split", default="train", choices=("train", "val", "test"))
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     run = load_run(args.run, config_registry(), device="cpu")
     print("| view | pixel (row, col) | miss | point depth | rendered depth |\n|---|---|---|---|---|")
     for s in probe(run.pipeline, run.step, torch.tensor(args.point), args.split):
@@ -71,4 +72,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_cli(main)  # a missing or broken run: one message and its fix, exit 2

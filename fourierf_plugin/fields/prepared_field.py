@@ -83,11 +83,9 @@ class PreparedField(nn.Module):
 
     def low_pass_lines(self, lines: Tensor, f: float) -> Tensor:
         """[..., L] lines at cutoff ``f``, with the field's boundary (periodic or mirror)."""
-        return (
-            fourier.mirrored(self.ops.filter_lines, lines, f, 1)
-            if self.mirror_boundary
-            else self.ops.filter_lines(lines, f)
-        )
+        if self.mirror_boundary:
+            return fourier.mirrored(self.ops.filter_lines, lines, f, 1)
+        return self.ops.filter_lines(lines, f)
 
     # -- preparation ----------------------------------------------------------------------------------------------
     def prepare(self, f_density: float, f_color: float) -> None:

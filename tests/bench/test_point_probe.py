@@ -7,7 +7,8 @@ from pathlib import Path
 import pytest
 import torch
 
-from tests.helpers import load_benchmark, train_tiny
+from fourierf_plugin.scripts.cli import EXIT_USER_ERROR
+from tests.helpers import cli_exit_code, load_benchmark, train_tiny
 
 
 def test_a_rendered_surface_point_is_seen_at_its_own_depth(tmp_path: Path) -> None:
@@ -27,3 +28,12 @@ def test_a_rendered_surface_point_is_seen_at_its_own_depth(tmp_path: Path) -> No
     beyond = point_probe.probe(pipeline, step, origin + (depth * 1.5) * direction)[0]  # behind the surface
     assert beyond.point_depth > beyond.rendered_depth
     assert torch.isfinite(torch.tensor([beyond.miss, beyond.point_depth, beyond.rendered_depth])).all()
+
+
+def test_a_missing_run_is_one_message_naming_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    point_probe = load_benchmark("point_probe")
+    missing = tmp_path / "nowhere" / "config.json"
+    code = cli_exit_code(point_probe.main, ["--run", str(missing), "--point", "0", "0", "0"])
+    err = " ".join(capsys.readouterr().err.split())
+    assert code == EXIT_USER_ERROR
+    assert str(missing) in err and "fix:" in err and "Traceback" not in err

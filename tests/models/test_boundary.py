@@ -8,13 +8,16 @@ field the model builds.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
+import pytest
 import torch
 
 from fourierf_plugin.field_components import fourier
 from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig
 from fourierf_plugin.models.fourierf import FourierConfig, FourieRFModelConfig
-from tests.helpers import ndc_model
+from fourierf_plugin.scripts import train as train_script
+from tests.helpers import TINY_SCENE, cli_exit_code, ndc_model
 from tests.models.test_zerorf import _model as zerorf_model
 
 
@@ -43,3 +46,14 @@ def test_mirror_boundaries_reach_the_zerorf_field_and_keep_gradients() -> None:
     model.field.density(xyz).sum().backward()
     grads = [p.grad for p in model.field.parameters() if p.grad is not None]
     assert grads and all(torch.isfinite(g).all() for g in grads)
+
+
+def test_an_unknown_boundary_is_refused_naming_the_flag_and_the_choices(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    flag = "--pipeline.model.fourier.boundary"
+    args = ["fourierf-vm", "--data", str(TINY_SCENE), "--output-dir", str(tmp_path), flag, "wrap"]
+    assert cli_exit_code(train_script.main, args) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert "wrap" in err and flag in err and "mirror" in err and "periodic" in err
+    assert not any(tmp_path.iterdir()), "a refused run leaves nothing behind"

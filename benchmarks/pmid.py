@@ -183,6 +183,9 @@ LATE_ALPHA_MASK = ["--pipeline.model.occupancy-update-fractions", "0.3", "0.5"]
 """The occupancy grid's two updates at 30 % and 50 % of the run (the object default: 20 % and 40 %)."""
 RANDOM_BACKGROUND = ["--pipeline.effects.background", "random"]
 MIRROR = ["--pipeline.model.fourier.boundary", "mirror"]
+L1_OFF = ["--pipeline.model.l1-weight-initial", "0", "--pipeline.model.l1-weight-rest", "0"]
+L1_LATE = ["--pipeline.model.l1-weight-initial", "0"]
+"""No density L1 before the first occupancy update (TensoRF's 4e-5 from there on)."""
 OCCUPANCY_AT_STEP_200 = ["--pipeline.model.occupancy-update-fractions", "0.25"]
 """A forward-facing run's one occupancy update at 25 % of 800 iterations, step 200 (the real preset: 10 %, step 80)."""
 EARLY_FINAL_GRID = ["--pipeline.model.field.upsample-fractions", "0.01"]
@@ -345,6 +348,22 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "wd0-nodecay-lr0.04-tv4-alphamask0.3": [*LEGO_TV4, *LATE_ALPHA_MASK],
         # Session 28: the regime the paper says the curriculum is for, a grid finer than the images need (P-CPU's
         # 100x100 views on 96³ -> 192³ and 128³ -> 256³ instead of 64³ -> 128³), where TensoRF should overfit first.
+        # Session 30: why a random background empties a field (comp8 at 800, tensorf-vm at seed 20211202): the field
+        # never lit (train PSNR 13 from step 50, density L1 down 20x by step 50). Is it the density L1 winning over
+        # the weaker, noisier pull of object pixels on a random background?
+        "wd0-nodecay-lr0.04-tv4-bgrand-l1off": [*LEGO_TV4, *RANDOM_BACKGROUND, *L1_OFF],
+        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgrand-l1off": [
+            *LEGO_TV4, *components(8, 24), *first_band("0.05"), *RANDOM_BACKGROUND, *L1_OFF],
+        # It is (both lit and ended at 21.64 and 23.19 without it). Which part helps: the L1's absence or the random
+        # background, and does the L1 once the field has lit (from the first occupancy update) empty it again?
+        "wd0-nodecay-lr0.04-tv4-comp8-l1off": [*LEGO_TV4, *components(8, 24), *L1_OFF],
+        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-l1off": [*LEGO_TV4, *components(8, 24), *first_band("0.05"), *L1_OFF],
+        "wd0-nodecay-lr0.04-tv4-comp8-bgrand-l1off": [*LEGO_TV4, *components(8, 24), *RANDOM_BACKGROUND, *L1_OFF],
+        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgrand-l1late": [
+            *LEGO_TV4, *components(8, 24), *first_band("0.05"), *RANDOM_BACKGROUND, *L1_LATE],
+        "wd0-nodecay-lr0.04-tv4-comp8-f0.03-bgrand-l1off": [
+            *LEGO_TV4, *components(8, 24), *first_band("0.03"), *RANDOM_BACKGROUND, *L1_OFF],
+        "wd0-nodecay-lr0.04-tv4-f0.05-bgrand-l1off": [*LEGO_TV4, *first_band("0.05"), *RANDOM_BACKGROUND, *L1_OFF],
         **{
             f"wd0-nodecay-lr0.04-tv4-comp8-g{final}": [*LEGO_TV4, *components(8, 24), *grid(final // 2, final)]
             for final in (192, 256)

@@ -97,6 +97,12 @@ RULES: tuple[Rule, ...] = (
     Rule(f"{_MODEL}.cull_weight_threshold", within(0.0, 1.0), "a weight in [0, 1] (0 = off)", "1e-4"),
     Rule(f"{_MODEL}.occlusion_fraction", within(1e-9, 1.0), "a fraction of the ray in (0, 1]", "0.15625"),
     Rule(f"{_MODEL}.floaters_gradient_scaling_from", within(0.0, 1.0), "a fraction of the run in [0, 1]", "0.2667"),
+    Rule(
+        f"{_MODEL}.random_background_from",
+        optional(within(0.0, 1.0)),
+        "a fraction of the run in [0, 1] (omitted = after the first occupancy update)",
+        "0.2",
+    ),
     Rule(f"{_ACCEL}.render_chunk_rays", int_at_least(1), "an integer >= 1", "2048"),
     Rule(f"{_ACCEL}.early_stop_transmittance", within(0.0, 0.5), "a transmittance in [0, 0.5]", "1e-4"),
     Rule(f"{_ACCEL}.early_stop_segment", int_at_least(1), "an integer >= 1", "128"),

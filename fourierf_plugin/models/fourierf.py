@@ -141,6 +141,8 @@ class FourieRFModel(nn.Module):
         self.occupancy_steps = schedules.steps_from_fractions(config.occupancy_update_fractions, max_iters)
         self.floaters_from_step = round(config.floaters_gradient_scaling_from * max_iters)
         self._floaters_now = self.floaters_scaling_at(0)  # ``prepare`` sets it for each step
+        self.random_background_step = self._random_background_step()
+        self._background_now = self.training_background(0)  # ``prepare`` sets it for each step
         self.field = self._build_field(scene_box, effects, generator, device)
         if config.fourier.enabled and config.fourier.init_in_band and isinstance(self.field, FourierTensoRFField):
             self.field.keep_band(*self.cutoffs(0))
@@ -197,6 +199,19 @@ class FourieRFModel(nn.Module):
         """Whether Floaters-No-More scales this step's gradients (from ``floaters_gradient_scaling_from`` on)."""
         return self.config.floaters_gradient_scaling and step >= self.floaters_from_step
 
+    def _random_background_step(self) -> int:
+        if self.config.random_background_from is not None:
+            return round(self.config.random_background_from * self.max_iters)
+        return self.occupancy_steps[0] + 1 if self.occupancy_steps else 0
+
+    def training_background(self, step: int) -> str:
+        """The background this step trains on: a random one only from ``random_background_step`` on, the evaluation
+        background (white) before it (``random_background_from``)."""
+        kind = self.effects.background
+        if kind == "random" and step < self.random_background_step:
+            return self.effects.eval_background
+        return kind
+
     def l1_weight(self, step: int) -> float:
         # The switch happens after the first update's own step, i.e. from the next step on.
         first = self.occupancy_steps[0] + 1 if self.occupancy_steps else None
@@ -229,6 +244,7 @@ class FourieRFModel(nn.Module):
         with phase("fourier_filter"):
             self.field.prepare(*self.cutoffs(step))
         self._floaters_now = self.floaters_scaling_at(step)
+        self._background_now = self.training_background(step)
 
     def forward(
         self,
@@ -244,7 +260,7 @@ class FourieRFModel(nn.Module):
         marching once they are opaque.
         """
         if background is None:
-            kind = self.effects.background if self.training else self.effects.eval_background
+            kind = self._background_now if self.training else self.effects.eval_background
             background = background_color(kind, origins.shape[0], origins.device, self.generator, self.step_generator)
         with phase("sampling"):
             samples = self.sample(origins, directions, jitter)
@@ -486,6 +502,15 @@ class FourieRFModelConfig(InstantiateConfig):
     """Weight of the occlusion regulariser (FreeNeRF: 0.01)."""
     occlusion_fraction: float = 20 / 128
     """Share of each ray, from its start, whose densities the occlusion term penalises (FreeNeRF: 20 of 128)."""
+    random_background_from: float | None = None
+    """Where the scene trains on a random background: the fraction of the run from which it does, the evaluation
+    background (white) before it; None = from the step after the first occupancy update (0 without one). Why not
+    from the start: a random background charges density only on rays that cross the background in some training
+    view, so the fog a fresh field starts with stays wherever none does, keeps the occupancy grid's box from
+    shrinking (lego at P-MID: 2.5 x 3.0 x 2.2 against 1.5 x 2.6 x 1.8) and shows as coloured floaters at the box's
+    edges; and under it TensoRF's density L1 emptied fields that had not lit yet (lego, seed 20211202, val 9.60).
+    On white first the L1 clears the fog and the field lights; the random background then charges what white cannot,
+    density outside the object's silhouette (README, "Scene effects")."""
     floaters_gradient_scaling: bool = False
     """'Floaters No More': scale density and colour gradients by clamp(t², 0, 1) (t: the ray parameter)."""
     floaters_gradient_scaling_from: float = 0.0

@@ -322,6 +322,7 @@ CASES: dict[str, Case] = {
     "train: floaters scaling from past the run": out_of_range(
         f"{MODEL}.floaters-gradient-scaling-from", "1.5", "[0, 1]"
     ),
+    "train: a random background from past the run": out_of_range(f"{MODEL}.random-background-from", "1.5", "[0, 1]"),
     "train: a start for floaters scaling that is off": Case(
         "train",
         train_with(f"{MODEL}.floaters-gradient-scaling-from", "0.5"),

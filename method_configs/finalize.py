@@ -63,7 +63,7 @@ def finalize(config: TrainerConfig, given: frozenset[str] = frozenset()) -> tupl
     config.scene_preset = preset
     reference = preset_under_scene(all_methods.get(config.method_name), preset)
     notes += size_the_run(config, reference, not declared.bounded, given)
-    notes += apply_budget_rule(config, reference, given)
+    notes += apply_budget_rule(config, reference, given, declared.background)
     resolve_tv_decay(config)
     effects = config.pipeline.effects.resolve(declared)
     config.pipeline.effects = EffectsConfig.of(effects)

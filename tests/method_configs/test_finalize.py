@@ -10,6 +10,7 @@ another method; ``config_registry`` must know every config class a saved run of 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import subprocess
 import sys
@@ -23,7 +24,12 @@ from fourierf_plugin.data.parsers.llff import LLFF_DECLARATION, LLFFDataParserCo
 from fourierf_plugin.data.scene_effects import EffectsConfig, SceneEffects
 from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.method_configs import all_methods, config_registry, finalize, resume_config
-from fourierf_plugin.method_configs.budget import OBJECT_COMPONENTS, OBJECT_TV_WEIGHT, short_run_settings
+from fourierf_plugin.method_configs.budget import (
+    OBJECT_COMPONENTS,
+    OBJECT_FIRST_BAND,
+    OBJECT_TV_WEIGHT,
+    short_run_settings,
+)
 from fourierf_plugin.method_configs.finalize import ignored_on_resume
 from fourierf_plugin.method_configs.scene_presets import (
     REAL_SCENE_SETTINGS,
@@ -69,7 +75,8 @@ def without_decisions(config: TrainerConfig) -> dict:
     data["pipeline"]["model"]["field"].pop("appearance_components")
     for tv in ("tv_decay_ratio", "tv_weight_density", "tv_weight_appearance"):
         data["pipeline"]["model"].pop(tv)
-    data["pipeline"]["model"]["fourier"].pop("ramp_fraction")
+    for fourier in ("ramp_fraction", "f0_density", "f0_color"):
+        data["pipeline"]["model"]["fourier"].pop(fourier)
     data["optimizer"].pop("weight_decay")
     data["optimizer"].pop("lr_grids")
     data["optimizer"].pop("lr_decay_ratio")
@@ -92,18 +99,23 @@ def test_blender_scene_keeps_the_synthetic_preset_and_gets_its_declared_effects(
     assert config.pipeline.datamanager.dataparser.data == TINY_SCENE, "--data is copied into the parser"
     assert config.scene_preset == "synthetic"
     assert without_decisions(config) == without_decisions(given), "a bounded scene changes no setting"
-    assert config.pipeline.effects == EffectsConfig.of(BLENDER_DECLARATION)
+    # the budget rule trains an object with alpha on a random background (both methods)
+    assert config.pipeline.effects == EffectsConfig.of(dataclasses.replace(BLENDER_DECLARATION, background="random"))
     assert notes[0].startswith("run size for 4 view(s) of 100x100 on cpu: ")
     assert notes[1].startswith(
         "budget rule (800 < 10000 iterations): weight_decay=0.0, lr_decay_ratio=1.0, lr_grids=0.04, "
         f"tv_weight_density={OBJECT_TV_WEIGHT}, tv_weight_appearance={OBJECT_TV_WEIGHT}, "
-        f"density_components={(OBJECT_COMPONENTS[0],) * 3}, appearance_components={(OBJECT_COMPONENTS[1],) * 3};"
+        f"density_components={(OBJECT_COMPONENTS[0],) * 3}, appearance_components={(OBJECT_COMPONENTS[1],) * 3}, "
+        f"background=random, f0_density={OBJECT_FIRST_BAND}, f0_color={OBJECT_FIRST_BAND};"
     )
-    assert notes[2:] == [
-        "scene effects: background=white, rays=euclidean, view-dependent=no, occlusion-regularisation=no "
-        "(the scene declares: background=white, rays=euclidean, view-dependent=no, occlusion-regularisation=no, "
+    declared = "(the scene declares: background=white, rays=euclidean, view-dependent=no, occlusion-regularisation=no, "
+    assert notes[2] == (
+        f"scene effects: background=random, rays=euclidean, view-dependent=no, occlusion-regularisation=no {declared}"
         "bounded)"
-    ]
+    )
+    assert len(notes) == 3
+    shorter, _ = finalize(raw(TINY_SCENE, "--max-num-iterations", "400"))
+    assert shorter.pipeline.effects == EffectsConfig.of(BLENDER_DECLARATION), "shorter runs keep the declared white"
 
 
 def test_without_data_the_parsers_own_path_is_used() -> None:

@@ -139,6 +139,8 @@ class FourieRFModel(nn.Module):
         self.upsample_steps = schedules.steps_from_fractions(fc.upsample_fractions, max_iters)
         self.voxel_targets = schedules.voxel_counts(fc.n_voxels_init, fc.n_voxels_final, len(self.upsample_steps))
         self.occupancy_steps = schedules.steps_from_fractions(config.occupancy_update_fractions, max_iters)
+        # the first step after the first occupancy update's own step (the L1's switch; the random background's start)
+        self.after_first_update = self.occupancy_steps[0] + 1 if self.occupancy_steps else None
         self.floaters_from_step = round(config.floaters_gradient_scaling_from * max_iters)
         self._floaters_now = self.floaters_scaling_at(0)  # ``prepare`` sets it for each step
         self.random_background_step = self._random_background_step()
@@ -202,7 +204,7 @@ class FourieRFModel(nn.Module):
     def _random_background_step(self) -> int:
         if self.config.random_background_from is not None:
             return round(self.config.random_background_from * self.max_iters)
-        return self.occupancy_steps[0] + 1 if self.occupancy_steps else 0
+        return self.after_first_update or 0
 
     def training_background(self, step: int) -> str:
         """The background this step trains on: a random one only from ``random_background_step`` on, the evaluation
@@ -213,9 +215,8 @@ class FourieRFModel(nn.Module):
         return kind
 
     def l1_weight(self, step: int) -> float:
-        # The switch happens after the first update's own step, i.e. from the next step on.
-        first = self.occupancy_steps[0] + 1 if self.occupancy_steps else None
-        return schedules.l1_weight_at(step, first, self.config.l1_weight_initial, self.config.l1_weight_rest)
+        c = self.config
+        return schedules.l1_weight_at(step, self.after_first_update, c.l1_weight_initial, c.l1_weight_rest)
 
     # -- derived sampling parameters (from the current box and resolution) ------------------------------------
     @property

@@ -6,8 +6,7 @@ and by TensoRF alike, without the paper's weight decay 0.2 and without TensoRF's
 optimiser), at a grid lr 0.04, with TV 4 on the planes (``OBJECT_TV_WEIGHT``; lego val, the preset's -> the
 rule's: FourieRF 21.30 -> 22.57 at 800 iterations, 20.34 -> 22.48 at 3000; TensoRF 21.41 -> 22.62, 20.50 -> 21.74)
 and with half TensoRF's components (``OBJECT_COMPONENTS``); where its images carry alpha, on a random background from
-the first occupancy update on (``OBJECT_RANDOM_BACKGROUND_FROM``), FourieRF with a narrow first band on it
-(``OBJECT_FIRST_BAND``).
+the first occupancy update on (``OBJECT_RANDOM_BACKGROUND_FROM``).
 A forward-facing scene wants a 4x grid learning rate (TensoRF's 0.02 is tuned for 25k iterations: fern val 18.91 ->
 19.33 at 800, 18.27 -> 19.97 at 3000; tensorf-vm likewise) and a constant TV weight of 4 on the planes
 (``REAL_TV_WEIGHT``), both methods alike, and FourieRF, in a longer run, its band open by step 800
@@ -57,22 +56,16 @@ OBJECT_RANDOM_BACKGROUND_FROM = 800
 after the first occupancy update, white before (``--pipeline.model.random-background-from``'s default; README, "Scene
 effects"). On white, white density outside the object's silhouette costs the training views nothing and stays; a random
 background charges it. Lego val, TensoRF's white -> this: tensorf-vm 22.70 -> 23.26 at 800 iterations (mean of 3 seeds;
-test 22.79 -> 23.08), 22.84 -> 23.45 at 1500, 22.22 -> 22.70 at 3000 (P-MID, TV 6, one seed); fourierf-vm with the
+test 22.79 -> 23.08), 22.84 -> 23.45 at 1500, 22.45 -> 22.90 at 3000 (P-MID, TV 6, 3 seeds); fourierf-vm with the
 paper's band 22.73 -> 23.13 at 800. From the first step instead it emptied fields that had not lit and kept stray fog
 where no training ray crosses the background (P-MID, fourierf-vm with the band below: 20.99 without the density L1,
 21.71 with it from the first update, 22.84 starting after it). Measured from 800 iterations up; shorter runs, tests and
-previews keep white."""
+previews keep white. FourieRF keeps the paper's first band (f0 0.3) on it: a narrow one (0.05) fills the object's hull
+with smooth density, which the random background clears, and won at 800 iterations (23.13 -> 23.23, 3 seeds; session
+30's rule) but lost at every longer budget (3 seeds each: 1500 23.57 -> 23.29, 3000 23.39 -> 23.19, P-MID 22.86 ->
+22.80), where the paper's band is level with tensorf-vm or ahead of it (1500: 23.45, 3000: 23.43, P-MID at TV 6:
+22.90)."""
 
-OBJECT_FIRST_BAND = 0.05
-"""Object scenes on the rule's random background, FourieRF: both grids' first band (the paper's f0 0.3). A narrow band
-fills the object's hull with smooth density, which the random background clears from outside the silhouette; on white it
-stays (13 lego val views at 1500 iterations: 3435 pixels opaque over the background against 1849 at f0 0.3) and the band
-lost (1500 iterations, one seed: 22.50 -> 21.98). Lego val, fourierf-vm on the random background, f0 0.3 -> 0.05: 23.13
--> 23.23 at 800 iterations (mean of 3 seeds; tensorf-vm on it 23.26); at 1500, 23.29 (3 seeds; white and f0 0.3: 22.77;
-tensorf-vm on it 23.45); P-MID, 3 seeds: 22.80 (white, f0 0.3: 22.55; tensorf-vm on it 22.70 on
-seed 20211202, where fourierf-vm read 22.84). A background the user chose keeps the preset's band."""
-
-FIRST_BAND_PATHS = ("pipeline.model.fourier.f0_density", "pipeline.model.fourier.f0_color")
 BACKGROUND_PATH = "pipeline.effects.background"
 
 REAL_TV_WEIGHT = 4.0
@@ -182,15 +175,13 @@ def object_components(scene_preset: str, iterations: int) -> dict[str, Any]:
     }
 
 
-def object_background(method: str, scene_preset: str, iterations: int, background: str) -> dict[str, Any]:
+def object_background(scene_preset: str, iterations: int, background: str) -> dict[str, Any]:
     """The rule's random training background (none: the declared one) for an object run of
     ``OBJECT_RANDOM_BACKGROUND_FROM`` iterations or more whose scene declares white (``background``: its images carry
-    alpha and are scored on white, which the random background's warm-up and its renders use; the one case measured),
-    and FourieRF's narrow first band that goes with it."""
+    alpha and are scored on white, which the random background's warm-up and its renders use; the one case measured)."""
     if scene_preset != "synthetic" or iterations < OBJECT_RANDOM_BACKGROUND_FROM or background != "white":
         return {}
-    band = dict.fromkeys(FIRST_BAND_PATHS, OBJECT_FIRST_BAND) if method == "fourierf-vm" else {}
-    return {BACKGROUND_PATH: "random", **band}
+    return {BACKGROUND_PATH: "random"}
 
 
 def short_run_settings(method: str, scene_preset: str, iterations: int, background: str = "white") -> dict[str, Any]:
@@ -199,7 +190,7 @@ def short_run_settings(method: str, scene_preset: str, iterations: int, backgrou
     if iterations >= PAPER_ITERATIONS or (method, scene_preset) not in SHORT_RUN_SETTINGS:
         return {}
     settings = SHORT_RUN_SETTINGS[(method, scene_preset)] | object_components(scene_preset, iterations)
-    settings |= object_background(method, scene_preset, iterations, background)
+    settings |= object_background(scene_preset, iterations, background)
     fourierf = method == "fourierf-vm"
     by_step = {
         "pipeline.model.fourier.ramp_fraction": ramp_fraction(scene_preset, iterations) if fourierf else None,
@@ -216,14 +207,13 @@ def apply_budget_rule(
     background: str = "white",
 ) -> list[str]:
     """Set the short-run values where the user left the preset's (a flag, ``given``, always wins) on a scene that
-    declares ``background``; the note that says so. The narrow first band comes only with the random background: a
-    training background the user chose keeps the preset's band (on white the narrow band lost, 1500 iterations)."""
+    declares ``background``; the note that says so. A training background the user chose is kept."""
     if not config.budget_rule:
         return []
     settings = short_run_settings(config.method_name, config.scene_preset, config.max_num_iterations, background)
     chosen = config.pipeline.effects.background
     if BACKGROUND_PATH in settings and chosen not in (None, "random"):
-        settings = {k: v for k, v in settings.items() if k != BACKGROUND_PATH and k not in FIRST_BAND_PATHS}
+        settings = {k: v for k, v in settings.items() if k != BACKGROUND_PATH}
     if not settings:
         return []
     applied, kept = apply_settings(config, pristine, settings, given)

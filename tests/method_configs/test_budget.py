@@ -12,7 +12,6 @@ from fourierf_plugin.method_configs import all_methods, finalize
 from fourierf_plugin.method_configs.budget import (
     OBJECT_COMPONENTS,
     OBJECT_COMPONENTS_FROM,
-    OBJECT_FIRST_BAND,
     OBJECT_RANDOM_BACKGROUND_FROM,
     OBJECT_TV_WEIGHT,
     PAPER_ITERATIONS,
@@ -52,10 +51,9 @@ def test_rule_is_a_function_of_the_iteration_count() -> None:
         "pipeline.model.field.appearance_components": (appearance,) * 3,
     }
     random = {"pipeline.effects.background": "random"}
-    band = dict.fromkeys(("pipeline.model.fourier.f0_density", "pipeline.model.fourier.f0_color"), OBJECT_FIRST_BAND)
     assert short_run_settings("tensorf-vm", "synthetic", PAPER_ITERATIONS - 1) == short | random, "masks off"
-    assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS - 1) == short | random | band
-    assert short_run_settings("fourierf-vm", "synthetic", OBJECT_RANDOM_BACKGROUND_FROM) == short | random | band
+    assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS - 1) == short | random, "the paper's band"
+    assert short_run_settings("fourierf-vm", "synthetic", OBJECT_RANDOM_BACKGROUND_FROM) == short | random
     assert OBJECT_RANDOM_BACKGROUND_FROM == OBJECT_COMPONENTS_FROM
     assert short_run_settings("fourierf-vm", "synthetic", 3000, "none") == short, "photos: no alpha, no random colour"
     assert short_run_settings("tensorf-vm", "synthetic", 3000, "none") == short
@@ -101,33 +99,28 @@ def test_cpu_run_of_an_object_drops_weight_decay_and_says_so() -> None:
     assert any(n.startswith("budget rule") and "weight_decay=0.0" in n for n in notes)
 
 
-def test_an_object_run_trains_on_a_random_background_and_fourierf_with_a_narrow_band() -> None:
+def test_an_object_run_trains_on_a_random_background_with_the_papers_band() -> None:
     config, notes = finished("fourierf-vm", TINY_SCENE)
     assert config.max_num_iterations >= OBJECT_RANDOM_BACKGROUND_FROM
     model = config.pipeline.model
-    assert model.fourier.f0_density == model.fourier.f0_color == OBJECT_FIRST_BAND
+    paper = all_methods["fourierf-vm"].pipeline.model.fourier
+    assert (model.fourier.f0_density, model.fourier.f0_color) == (paper.f0_density, paper.f0_color) == (0.3, 0.3)
     assert config.pipeline.effects.background == "random", "the scene declares white: its images carry alpha"
     assert model.random_background_from is None, "random from the step after the first occupancy update, white before"
-    assert any(n.startswith("budget rule") and "background=random, f0_density=0.05, f0_color=0.05" in n for n in notes)
-    tensorf, notes = finished("tensorf-vm", TINY_SCENE)
+    assert any(n.startswith("budget rule") and "background=random;" in n for n in notes)
+    assert not any("f0_density" in n for n in notes), "the narrow band lost from 1500 iterations on"
+    tensorf, _ = finished("tensorf-vm", TINY_SCENE)
     assert tensorf.pipeline.effects.background == "random", "the same background, masks off"
-    assert tensorf.pipeline.model.fourier.f0_density == all_methods["tensorf-vm"].pipeline.model.fourier.f0_density
-    assert not any("f0_density" in n for n in notes)
     short, _ = finished("fourierf-vm", TINY_SCENE, "--max-num-iterations", str(OBJECT_RANDOM_BACKGROUND_FROM - 1))
-    assert short.pipeline.effects.background == "white" and short.pipeline.model.fourier.f0_density == 0.3
+    assert short.pipeline.effects.background == "white"
 
 
 @pytest.mark.parametrize("background", ["white", "black"])
-def test_a_background_the_user_chose_keeps_the_presets_band(background: str) -> None:
-    """The narrow band won only on a random background (on white it lost at 1500 iterations)."""
+def test_a_background_the_user_chose_is_kept(background: str) -> None:
     config, notes = finished("fourierf-vm", TINY_SCENE, "--pipeline.effects.background", background)
     assert config.pipeline.effects.background == background
-    assert config.pipeline.model.fourier.f0_density == all_methods["fourierf-vm"].pipeline.model.fourier.f0_density
-    assert not any("f0_density" in n for n in notes)
-    mine, _ = finished("fourierf-vm", TINY_SCENE, "--pipeline.effects.background", "random")
-    assert mine.pipeline.model.fourier.f0_density == OBJECT_FIRST_BAND, "a random background the user chose: the band"
-    band, _ = finished("fourierf-vm", TINY_SCENE, "--pipeline.model.fourier.f0-density", "0.2")
-    assert (band.pipeline.model.fourier.f0_density, band.pipeline.model.fourier.f0_color) == (0.2, OBJECT_FIRST_BAND)
+    assert not any("background=random" in n for n in notes)
+    assert any(n.startswith("budget rule") for n in notes), "the rest of the rule still applies"
 
 
 def test_paper_budget_keeps_the_papers_values() -> None:

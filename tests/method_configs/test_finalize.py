@@ -26,7 +26,6 @@ from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.method_configs import all_methods, config_registry, finalize, resume_config
 from fourierf_plugin.method_configs.budget import (
     OBJECT_COMPONENTS,
-    OBJECT_FIRST_BAND,
     OBJECT_TV_WEIGHT,
     short_run_settings,
 )
@@ -106,7 +105,7 @@ def test_blender_scene_keeps_the_synthetic_preset_and_gets_its_declared_effects(
         "budget rule (800 < 10000 iterations): weight_decay=0.0, lr_decay_ratio=1.0, lr_grids=0.04, "
         f"tv_weight_density={OBJECT_TV_WEIGHT}, tv_weight_appearance={OBJECT_TV_WEIGHT}, "
         f"density_components={(OBJECT_COMPONENTS[0],) * 3}, appearance_components={(OBJECT_COMPONENTS[1],) * 3}, "
-        f"background=random, f0_density={OBJECT_FIRST_BAND}, f0_color={OBJECT_FIRST_BAND};"
+        "background=random;"
     )
     declared = "(the scene declares: background=white, rays=euclidean, view-dependent=no, occlusion-regularisation=no, "
     assert notes[2] == (

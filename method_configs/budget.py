@@ -32,7 +32,9 @@ OBJECT_TV_WEIGHT = 4.0
 lego's val views at the rest of the object rule. 800 iterations, mean of 3 seeds: fourierf-vm TV 2 22.56, 3 22.52,
 4 22.59 (TV 1 22.02, one seed); tensorf-vm TV 1 22.04, 4 22.69 (6 22.40, one seed). 3000 iterations (P-MID), one
 seed: fourierf-vm TV 1 21.97, 2 22.44, 4 22.48, 6 22.05; tensorf-vm TV 1 20.38, 4 21.74, 6 22.22, 8 22.07 (3 seeds:
-fourierf-vm TV 4 22.57, tensorf-vm TV 6 22.45)."""
+fourierf-vm TV 4 22.57, tensorf-vm TV 6 22.45). TensoRF's need for TV 6 there follows P-MID's finer images and grid,
+not its iteration count: at P-CPU's sizes and 3000 iterations on the random background tensorf-vm read 23.58 at TV 4
+against 23.11 at TV 6 (one seed), so the rule, a function of the iteration count, keeps TV 4 for both."""
 
 OBJECT_COMPONENTS = (8, 24)
 """Object scenes, both methods: density and appearance components per plane/line group, half TensoRF's (16, 48). Chosen

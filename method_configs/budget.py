@@ -209,13 +209,10 @@ def apply_budget_rule(
     background: str = "white",
 ) -> list[str]:
     """Set the short-run values where the user left the preset's (a flag, ``given``, always wins) on a scene that
-    declares ``background``; the note that says so. A training background the user chose is kept."""
+    declares ``background``; the note that says so."""
     if not config.budget_rule:
         return []
     settings = short_run_settings(config.method_name, config.scene_preset, config.max_num_iterations, background)
-    chosen = config.pipeline.effects.background
-    if BACKGROUND_PATH in settings and chosen not in (None, "random"):
-        settings = {k: v for k, v in settings.items() if k != BACKGROUND_PATH}
     if not settings:
         return []
     applied, kept = apply_settings(config, pristine, settings, given)

@@ -120,7 +120,8 @@ def test_a_background_the_user_chose_is_kept(background: str) -> None:
     config, notes = finished("fourierf-vm", TINY_SCENE, "--pipeline.effects.background", background)
     assert config.pipeline.effects.background == background
     assert not any("background=random" in n for n in notes)
-    assert any(n.startswith("budget rule") for n in notes), "the rest of the rule still applies"
+    rule = [n for n in notes if n.startswith("budget rule")]
+    assert len(rule) == 1 and "kept your pipeline.effects.background" in rule[0], "the rest of the rule still applies"
 
 
 def test_paper_budget_keeps_the_papers_values() -> None:

@@ -24,11 +24,7 @@ from fourierf_plugin.data.parsers.llff import LLFF_DECLARATION, LLFFDataParserCo
 from fourierf_plugin.data.scene_effects import EffectsConfig, SceneEffects
 from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.method_configs import all_methods, config_registry, finalize, resume_config
-from fourierf_plugin.method_configs.budget import (
-    OBJECT_COMPONENTS,
-    OBJECT_TV_WEIGHT,
-    short_run_settings,
-)
+from fourierf_plugin.method_configs.budget import OBJECT_COMPONENTS, OBJECT_TV_WEIGHT, short_run_settings
 from fourierf_plugin.method_configs.finalize import ignored_on_resume
 from fourierf_plugin.method_configs.scene_presets import (
     REAL_SCENE_SETTINGS,
@@ -74,8 +70,7 @@ def without_decisions(config: TrainerConfig) -> dict:
     data["pipeline"]["model"]["field"].pop("appearance_components")
     for tv in ("tv_decay_ratio", "tv_weight_density", "tv_weight_appearance"):
         data["pipeline"]["model"].pop(tv)
-    for fourier in ("ramp_fraction", "f0_density", "f0_color"):
-        data["pipeline"]["model"]["fourier"].pop(fourier)
+    data["pipeline"]["model"]["fourier"].pop("ramp_fraction")
     data["optimizer"].pop("weight_decay")
     data["optimizer"].pop("lr_grids")
     data["optimizer"].pop("lr_decay_ratio")

@@ -162,7 +162,12 @@ PROTOCOLS = {  # name, iterations, rays per batch, initial and final grid side, 
     # Between the two: where the budget rule's revival at once (over 800 iterations) starts to pay (fern), and whether
     # P-CPU's val choices carry past 800 iterations (lego, session 27).
     "pcpu1500": Protocol("P-CPU sizes, 1500 it.", 1500, 1024, 64, 128, 4),
+    # Toward the paper's Blender protocol (128³ → 300³ at 800×800; session 32): lego at the shared data's full 400×400
+    # with the paper's grids, P-MID's iterations and rays. Does the curriculum's edge grow with the image and grid?
+    "phigh": Protocol("P-HIGH (lego 400×400, 300³)", 3000, 2048, 128, 300, 1),
 }
+PROTOCOL_SCENES = {"pmid800": ("fern",), "phigh": ("lego",)}
+"""The protocols that measure one scene only (the sweep skips the other)."""
 CURVE_BASE = {"pcpu3000": "pcpu", "pmid": "pmid800"}
 """A curve's protocol and the 800-iteration protocol of the same sizes, whose val-chosen setting the curve trains."""
 CURVE_EVERY = 500
@@ -377,6 +382,8 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm": [
             *LEGO_TV4, *components(8, 24), *first_band("0.05"), *RANDOM_AFTER_UPDATE],
         "wd0-nodecay-lr0.04-tv6-bgwarm": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_AFTER_UPDATE],
+        # Session 32: TensoRF's TV need at P-HIGH's image and grid (TV 6 won at P-MID's, TV 4 at P-CPU's).
+        "wd0-nodecay-lr0.04-tv8-bgwarm": [*RULE_LEGO, *tv_weights(8.0), *RANDOM_AFTER_UPDATE],
         # tensorf-vm's P-MID choice (TV 6) with the same random background and no L1: does TensoRF, which overfits
         # more at P-MID, gain from it there (it lost at P-CPU: 22.80 -> 22.13)?
         "wd0-nodecay-lr0.04-tv6-bgrand-l1off": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_BACKGROUND, *L1_OFF],
@@ -608,7 +615,9 @@ def sweep_plan(args: argparse.Namespace) -> list[tuple[str, Run]]:
         for scene in args.scene
         for setting in SETTINGS[scene]
         for method in args.methods or METHODS
-        if applies(method, setting) and (p != "pmid800" or scene == "fern") and (not args.only or setting in args.only)
+        if applies(method, setting)
+        and scene in PROTOCOL_SCENES.get(p, (scene,))
+        and (not args.only or setting in args.only)
     ]
 
 

@@ -14,6 +14,7 @@ Each run is rendered in this process the way ``fourierf-eval`` renders it (its t
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -26,15 +27,19 @@ from fourierf_plugin.method_configs import config_registry
 from fourierf_plugin.utils.colormaps import colorize_accumulation, colorize_depth, depth_range, to_uint8
 
 
-def columns(config: Path, split: str, views: int) -> list[dict]:
-    """The first ``views`` views of the split rendered as ``fourierf-eval`` renders them: rgb, target, depth and
-    accumulation."""
+def columns(config: Path, split: str, views: int, names: Sequence[str] = ()) -> list[dict]:
+    """The split's views named in ``names`` (else its first ``views``) rendered as ``fourierf-eval`` renders them:
+    rgb, target, depth and accumulation."""
     run = load_run(config, config_registry(), device="cpu")
     out = []
-    for k, r in enumerate(run.pipeline.render_views(split, run.step)):
-        if k == views:
+    for r in run.pipeline.render_views(split, run.step):
+        if len(out) == (len(names) or views):
             break
-        out.append({"name": r.view.name, "rgb": r.rgb, "target": r.target, "depth": r.depth, "acc": r.accumulation})
+        if not names or r.view.name in names:
+            out.append({"name": r.view.name, "rgb": r.rgb, "target": r.target, "depth": r.depth, "acc": r.accumulation})
+    missing = sorted(set(names) - {view["name"] for view in out})
+    if missing:
+        raise SystemExit(f"error: {config}: no view {', '.join(missing)} in its {split} split")
     return out
 
 
@@ -44,13 +49,14 @@ def main() -> None:
     ap.add_argument("--labels", nargs="+", required=True)
     ap.add_argument("--split", default="test")
     ap.add_argument("--views", type=int, default=2, help="how many of the split's views (rows of RGB/depth/acc)")
+    ap.add_argument("--view-names", nargs="+", default=(), help="these views of the split instead (e.g. r_0 r_80)")
     ap.add_argument("--output", type=Path, required=True)
     ap.add_argument("--downscale", type=int, default=2, help="shrink the grid by this factor (a smaller docs/ file)")
     args = ap.parse_args()
     keep_freed_memory()  # as the console scripts do: renders reuse freed tensor memory instead of faulting it back
     if len(args.labels) != len(args.runs):
         raise SystemExit("error: give one --labels entry per --runs entry")
-    renders = [columns(config, args.split, args.views) for config in args.runs]
+    renders = [columns(config, args.split, args.views, args.view_names) for config in args.runs]
     rows = []
     for k in range(len(renders[0])):
         rgb = [to_uint8(renders[0][k]["target"]), *[to_uint8(col[k]["rgb"]) for col in renders]]

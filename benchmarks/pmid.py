@@ -71,7 +71,7 @@ METHODS = ("fourierf-vm", "tensorf-vm")
 
 @dataclass(frozen=True)
 class Grid:
-    """A picture grid of fern's test views 0 and 8 (``benchmarks/picture_grid.py``) and what it shows."""
+    """A picture grid of two test views (``benchmarks/picture_grid.py``) and what it shows."""
 
     path: str
     runs: str
@@ -79,6 +79,9 @@ class Grid:
     columns: tuple[str, ...]
     reading: str
     """What the grid shows, read by eye (not measured)."""
+    heading: str = "Why fern ghosts"
+    scene: str = "fern"
+    views: str = "test views 0 and 8"
 
 
 GRIDS = (
@@ -848,10 +851,10 @@ def report(args: argparse.Namespace) -> list[str]:
         if (REPO / grid.path).is_file():
             heads = " | ".join(("ground truth", *grid.columns))
             body += [
-                f"Why fern ghosts: `{grid.path}` (`python benchmarks/picture_grid.py`, {grid.runs}; test views 0 and "
-                f"8). Columns: {heads}; rows: RGB, depth (turbo, dark = near, one range per view), accumulation.",
+                f"{grid.heading}: `{grid.path}` (`python benchmarks/picture_grid.py`, {grid.runs}; {grid.views}). "
+                f"Columns: {heads}; rows: RGB, depth (turbo, dark = near, one range per view), accumulation.",
                 "",
-                f"![fern: {', '.join(('ground truth', *grid.columns))}; rgb, depth, accumulation]({grid.path})",
+                f"![{grid.scene}: {', '.join(('ground truth', *grid.columns))}; rgb, depth, accumulation]({grid.path})",
                 "",
                 f"What the grid shows (read by eye, not measured): {grid.reading}",
                 "",

@@ -34,7 +34,10 @@ lego's val views at the rest of the object rule. 800 iterations, mean of 3 seeds
 seed: fourierf-vm TV 1 21.97, 2 22.44, 4 22.48, 6 22.05; tensorf-vm TV 1 20.38, 4 21.74, 6 22.22, 8 22.07 (3 seeds:
 fourierf-vm TV 4 22.57, tensorf-vm TV 6 22.45). TensoRF's need for TV 6 there follows P-MID's finer images and grid,
 not its iteration count: at P-CPU's sizes and 3000 iterations on the random background tensorf-vm read 23.58 at TV 4
-against 23.11 at TV 6 (one seed), so the rule, a function of the iteration count, keeps TV 4 for both."""
+against 23.11 at TV 6 (one seed), so the rule, a function of the iteration count, keeps TV 4 for both. At P-HIGH
+(400×400, 128³ -> 300³, 3000 iterations, one seed) TensoRF wanted still more (val TV 6 21.32, 8 21.40, 10 21.47)
+and stayed below fourierf-vm at TV 4 (22.37; test 22.43 against 21.30): FourieRF's TV need does not grow with the
+scale, TensoRF's does."""
 
 OBJECT_COMPONENTS = (8, 24)
 """Object scenes, both methods: density and appearance components per plane/line group, half TensoRF's (16, 48). Chosen

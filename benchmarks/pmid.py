@@ -133,6 +133,23 @@ GRIDS = (
         "lower left 0.36 and 0.33 against 0.33 periodic; 0.46 on this seed) and otherwise change little: a few near "
         "spots at the top edge, the plant one smooth layer, the wall at the right far.",
     ),
+    Grid(
+        "docs/lego_grid_phigh.png",
+        "P-HIGH runs of session 32, seed 20211202, each method's val choice there: fourierf-vm "
+        "`wd0-nodecay-lr0.04-tv4-comp8-bgwarm` (val / test 22.37 / 22.43) and tensorf-vm "
+        "`wd0-nodecay-lr0.04-tv10-bgwarm` "
+        "(21.47 / 21.30); `--view-names r_0 r_80`",
+        ("fourierf-vm", "tensorf-vm"),
+        "both fill the object and leave the background empty. From the front (r_0) tensorf-vm's accumulation has a "
+        "dark seam along the left track where fourierf-vm's is whole (both show a few specks at the baseplate's front "
+        "edge). From the side (r_80) "
+        "both hang a skirt of density below the baseplate, which no training view sees from below, tensorf-vm's "
+        "longer; tensorf-vm has floaters beside the bucket arm and the cab and renders the tracks as a dark smear, "
+        "where fourierf-vm's tracks keep their outline. Both depths are one layer; the difference is in the edges.",
+        "What the gap looks like at P-HIGH",
+        "lego",
+        "test views r_0 and r_80",
+    ),
 )
 
 SEEDS = (20211202, 1, 2)

@@ -19,8 +19,8 @@ at 192). TensoRF's LLFF configuration grows to 640³ over 25k iterations at 1/4 
 protocol to 300³ at 800×800: neither fits a CPU's 20 minutes, and at 200×200 or 504×378 a 192³ grid already holds more
 voxels along each axis than the images have pixels across the scene.
 P-HIGH (session 32) goes one step toward the paper's Blender protocol where a CPU still can: lego at the shared data's
-full 400×400 with the paper's grids (128³ → 300³), at P-MID's iterations and rays; about an hour a run, two at a time
-with one thread each, so one seed.
+full 400×400 with the paper's grids (128³ → 300³), at P-MID's iterations and rays; 40-75 minutes a run with its
+evaluation, two at a time with one thread each, so one seed.
 
 Settings are chosen on validation views only (lego: every 8th of Blender's val split; fern: training images no run
 trains on, 2 9 18); the test views (lego every 8th test view, fern 0 8 16) are evaluated for every run but only the
@@ -137,13 +137,12 @@ GRIDS = (
         "docs/lego_grid_phigh.png",
         "P-HIGH runs of session 32, seed 20211202, each method's val choice there: fourierf-vm "
         "`wd0-nodecay-lr0.04-tv4-comp8-bgwarm` (val / test 22.37 / 22.43) and tensorf-vm "
-        "`wd0-nodecay-lr0.04-tv10-bgwarm` "
-        "(21.47 / 21.30); `--view-names r_0 r_80`",
+        "`wd0-nodecay-lr0.04-tv10-bgwarm` (21.47 / 21.30); `--view-names r_0 r_80`",
         ("fourierf-vm", "tensorf-vm"),
         "both fill the object and leave the background empty. From the front (r_0) tensorf-vm's accumulation has a "
         "dark seam along the left track where fourierf-vm's is whole (both show a few specks at the baseplate's front "
-        "edge). From the side (r_80) "
-        "both hang a skirt of density below the baseplate, which no training view sees from below, tensorf-vm's "
+        "edge). From the side (r_80) both hang a skirt of density below the baseplate, which no training view sees "
+        "from below, tensorf-vm's "
         "longer; tensorf-vm has floaters beside the bucket arm and the cab and renders the tracks as a dark smear, "
         "where fourierf-vm's tracks keep their outline. Both depths are one layer; the difference is in the edges.",
         "What the gap looks like at P-HIGH",

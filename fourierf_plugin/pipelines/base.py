@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -116,10 +116,13 @@ class Pipeline:
                 get_console().print(f"ray filtering: kept {after} of {before} training rays")
         return changes
 
-    def render_views(self, split: Split, step: int) -> Iterator[RenderedView]:
-        """Every view of a split rendered at the cutoffs of ``step``, beside its target on the same background."""
+    def render_views(self, split: Split, step: int, names: Collection[str] = ()) -> Iterator[RenderedView]:
+        """Every view of a split (only those in ``names`` when given: the others are not rendered) at the cutoffs of
+        ``step``, beside its target on the same background."""
         background = background_color(self.effects.eval_background, 1, self.device, None)
         for view in self.datamanager.eval_views(split):
+            if names and view.name not in names:
+                continue
             start = time.perf_counter()
             out = self.model.render_rays(view.rays.origins, view.rays.directions, step)
             seconds = time.perf_counter() - start

@@ -21,5 +21,5 @@ def test_views_are_picked_by_name_or_as_the_splits_first(tmp_path: Path) -> None
     assert [c["name"] for c in picked] == [names[-1]], "a named view wins over the split's first"
     rgb, depth = picked[0]["rgb"], picked[0]["depth"]
     assert rgb.shape[:2] == depth.shape[:2] == picked[0]["target"].shape[:2]
-    with pytest.raises(SystemExit, match="no view r_nowhere"):
+    with pytest.raises(SystemExit, match=f"no view r_nowhere in its test split \\(it has \\['{names[0]}'"):
         picture_grid.columns(config, "test", 1, ["r_nowhere"])

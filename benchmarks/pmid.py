@@ -188,8 +188,11 @@ PROTOCOLS = {  # name, iterations, rays per batch, initial and final grid side, 
     # Toward the paper's Blender protocol (128³ → 300³ at 800×800; session 32): lego at the shared data's full 400×400
     # with the paper's grids, P-MID's iterations and rays. Does the curriculum's edge grow with the image and grid?
     "phigh": Protocol("P-HIGH (lego 400×400, 300³)", 3000, 2048, 128, 300, 1),
+    # P-MID's images with P-HIGH's grids (the issue's example P-MID names a 300³ final grid; session 33): of
+    # P-HIGH's two changes from P-MID, is it the finer grid or the finer images that opens the curriculum's edge?
+    "pmid300": Protocol("P-MID images, 300³ (lego 200×200)", 3000, 2048, 128, 300, 2),
 }
-PROTOCOL_SCENES = {"pmid800": ("fern",), "phigh": ("lego",)}
+PROTOCOL_SCENES = {"pmid800": ("fern",), "phigh": ("lego",), "pmid300": ("lego",)}
 """The protocols that measure one scene only (the sweep skips the other)."""
 CURVE_BASE = {"pcpu3000": "pcpu", "pmid": "pmid800"}
 """A curve's protocol and the 800-iteration protocol of the same sizes, whose val-chosen setting the curve trains."""

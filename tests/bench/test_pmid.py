@@ -67,8 +67,9 @@ def test_plans_skip_curriculum_settings_for_tensorf_and_keep_only(pmid: ModuleTy
     assert {r.method for _, r in pmid.sweep_plan(args)} == {"fourierf-vm"}, "--methods keeps the others out"
     args = argparse.Namespace(protocol=["pmid800"], scene=["lego", "fern"], only=None, methods=None)
     assert {scene for scene, _ in pmid.sweep_plan(args)} == {"fern"}, "P-MID at 800 iterations is fern's check"
-    args = argparse.Namespace(protocol=["phigh"], scene=["lego", "fern"], only=None, methods=None)
-    assert {scene for scene, _ in pmid.sweep_plan(args)} == {"lego"}, "P-HIGH measures lego only"
+    for single_scene in ("phigh", "pmid300"):
+        args = argparse.Namespace(protocol=[single_scene], scene=["lego", "fern"], only=None, methods=None)
+        assert {scene for scene, _ in pmid.sweep_plan(args)} == {"lego"}, f"{single_scene} measures lego only"
 
 
 def test_an_unknown_setting_is_one_clear_error(tmp_path: Path) -> None:

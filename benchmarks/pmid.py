@@ -13,6 +13,7 @@ table.
 | P-CPU sizes, 3000 it. (curve) | 3000 | 1024 | 64³ → 128³ | 100×100 | 504×378 (images_8) |
 | P-CPU sizes, 1500 it. (the rule between) | 1500 | 1024 | 64³ → 128³ | 100×100 | 504×378 (images_8) |
 | P-HIGH (lego only) | 3000 | 2048 | 128³ → 300³ | 400×400 | — |
+| P-MID images, 300³ (lego only) | 3000 | 2048 | 128³ → 300³ | 200×200 | — |
 
 P-MID's final grid is what the CPU run sizing picks for these images (1.28 voxels per pixel of the larger side, capped
 at 192). TensoRF's LLFF configuration grows to 640³ over 25k iterations at 1/4 resolution and the paper's Blender
@@ -20,7 +21,9 @@ protocol to 300³ at 800×800: neither fits a CPU's 20 minutes, and at 200×200 
 voxels along each axis than the images have pixels across the scene.
 P-HIGH (session 32) goes one step toward the paper's Blender protocol where a CPU still can: lego at the shared data's
 full 400×400 with the paper's grids (128³ → 300³), at P-MID's iterations and rays; 40-75 minutes a run with its
-evaluation, two at a time with one thread each, so one seed.
+evaluation, two at a time with one thread each, so one seed. ``pmid300`` (session 33) is P-HIGH's grids on P-MID's
+images, the 300³ final grid the issue's example P-MID names (42-50 minutes of training a run here): which of P-HIGH's
+two changes opens the curriculum's edge.
 
 Settings are chosen on validation views only (lego: every 8th of Blender's val split; fern: training images no run
 trains on, 2 9 18); the test views (lego every 8th test view, fern 0 8 16) are evaluated for every run but only the

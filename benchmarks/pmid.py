@@ -412,14 +412,12 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
             *LEGO_TV4, *components(8, 24), *first_band("0.05"), *RANDOM_AFTER_UPDATE],
         "wd0-nodecay-lr0.04-tv6-bgwarm": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_AFTER_UPDATE],
         # Session 32: TensoRF's TV need at P-HIGH's image and grid (TV 6 won at P-MID's, TV 4 at P-CPU's).
-        "wd0-nodecay-lr0.04-tv8-bgwarm": [*RULE_LEGO, *tv_weights(8.0), *RANDOM_AFTER_UPDATE],
-        "wd0-nodecay-lr0.04-tv10-bgwarm": [*RULE_LEGO, *tv_weights(10.0), *RANDOM_AFTER_UPDATE],
-        # Session 33: TensoRF's val still rose at TV 10 on P-HIGH's 300³ grid; past it on the same grid (pmid300).
+        # Session 33: TV 14, past TV 10 where TensoRF's val still rose, on the same 300³ grid (pmid300).
         **{
             f"wd0-nodecay-lr0.04-tv{tv}-bgwarm": [*RULE_LEGO, *tv_weights(float(tv)), *RANDOM_AFTER_UPDATE]
-            for tv in (14, 20)
+            for tv in (8, 10, 14)
         },
-        # fourierf-vm's TV 4 (its val choice at every size up to P-MID) one step up on the 300³ grid.
+        # fourierf-vm one TV step above its TV 4 (its val choice at every size up to P-MID), on the 300³ grid.
         "wd0-nodecay-lr0.04-tv6-comp8-bgwarm": [*RULE_LEGO, *tv_weights(6.0), *components(8, 24), *RANDOM_AFTER_UPDATE],
         # tensorf-vm's P-MID choice (TV 6) with the same random background and no L1: does TensoRF, which overfits
         # more at P-MID, gain from it there (it lost at P-CPU: 22.80 -> 22.13)?

@@ -415,10 +415,15 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # Session 33: TV 14, past TV 10 where TensoRF's val still rose, on the same 300³ grid (pmid300).
         **{
             f"wd0-nodecay-lr0.04-tv{tv}-bgwarm": [*RULE_LEGO, *tv_weights(float(tv)), *RANDOM_AFTER_UPDATE]
-            for tv in (8, 10, 14)
+            for tv in (8, 10, 12, 14)
         },
-        # fourierf-vm one TV step above its TV 4 (its val choice at every size up to P-MID), on the 300³ grid.
-        "wd0-nodecay-lr0.04-tv6-comp8-bgwarm": [*RULE_LEGO, *tv_weights(6.0), *components(8, 24), *RANDOM_AFTER_UPDATE],
+        # fourierf-vm TV steps above its TV 4 (its val choice at every size up to P-MID), on the 300³ grid; session 34:
+        # TV 8 and tensorf-vm's TV 12, as TV 6 (fourierf-vm's best) was the top of its tried range.
+        **{
+            f"wd0-nodecay-lr0.04-tv{tv}-comp8-bgwarm": [
+                *RULE_LEGO, *tv_weights(float(tv)), *components(8, 24), *RANDOM_AFTER_UPDATE]
+            for tv in (6, 8)
+        },
         # tensorf-vm's P-MID choice (TV 6) with the same random background and no L1: does TensoRF, which overfits
         # more at P-MID, gain from it there (it lost at P-CPU: 22.80 -> 22.13)?
         "wd0-nodecay-lr0.04-tv6-bgrand-l1off": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_BACKGROUND, *L1_OFF],

@@ -224,3 +224,17 @@ def test_the_later_seeds_table_holds_gpu_settings_run_on_every_later_seed_beside
         "| lego | P-CPU | fourierf-vm | `tv4` (an older tree) | 21.50 / 20.00 | 22.50 / 21.00 | 22.00 / 20.50 |",
     ]
     assert pmid.later_seeds_table({r["key"]: r for r in rows[2:]}, []) == []
+
+
+def test_training_seconds_are_compared_on_one_device_both_methods_ran_on(pmid: ModuleType) -> None:
+    def run(device: str, seconds: float) -> dict:
+        return {"device": device, "train_seconds": seconds}
+
+    rows = {  # fourierf-vm all on a GPU; tensorf-vm's first seed on the CPU, its later two on the GPU
+        "fourierf-vm": [run("cuda", 210.0), run("cuda", 212.0), run("cuda", 214.0)],
+        "tensorf-vm": [run("cpu", 2986.0), run("cuda", 230.0), run("cuda", 234.0)],
+    }
+    assert pmid.comparable_seconds(rows) == ("cuda", {"fourierf-vm": 212.0, "tensorf-vm": 232.0})
+    rows["tensorf-vm"] = [run("cpu", 2986.0)]
+    device, secs = pmid.comparable_seconds(rows)
+    assert device == "no shared device" and all(s != s for s in secs.values())  # NaN, not a mixed mean

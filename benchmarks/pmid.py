@@ -418,11 +418,12 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
             for tv in (8, 10, 12, 14)
         },
         # fourierf-vm TV steps above its TV 4 (its val choice at every size up to P-MID), on the 300³ grid; session 34:
-        # TV 8 and tensorf-vm's TV 12, as TV 6 (fourierf-vm's best) was the top of its tried range.
+        # TV 8 and tensorf-vm's TV 12, as TV 6 (fourierf-vm's best) was the top of its tried range; TV 10 and 12, as
+        # TV 8 (val 23.03 over three seeds, TV 6 22.83) was again the top.
         **{
             f"wd0-nodecay-lr0.04-tv{tv}-comp8-bgwarm": [
                 *RULE_LEGO, *tv_weights(float(tv)), *components(8, 24), *RANDOM_AFTER_UPDATE]
-            for tv in (6, 8)
+            for tv in (6, 8, 10, 12)
         },
         # tensorf-vm's P-MID choice (TV 6) with the same random background and no L1: does TensoRF, which overfits
         # more at P-MID, gain from it there (it lost at P-CPU: 22.80 -> 22.13)?

@@ -824,14 +824,16 @@ def later_seeds_table(results: dict[str, dict], repeats: Sequence[dict]) -> list
     ]
 
 
-def comparable_seconds(rows: dict[str, list[dict]]) -> tuple[str, dict[str, float]]:
+def comparable_seconds(rows: dict[str, list[dict]]) -> str:
     """Each method's mean training seconds over its runs on one device both methods ran on (the one holding most of
-    their runs): a mean over a CPU run and two GPU runs set beside three CPU runs would read as a speed gap."""
+    their runs), as the summary's cell: a mean over a CPU run and two GPU runs set beside three CPU runs would read as
+    a speed gap."""
     shared = sorted(set.intersection(*({r["device"] for r in rows[m]} for m in METHODS)))
     if not shared:
-        return "no shared device", {m: float("nan") for m in METHODS}
+        return "— (no shared device)"
     device = max(shared, key=lambda d: sum(r["device"] == d for m in METHODS for r in rows[m]))
-    return device, {m: float(np.mean([r["train_seconds"] for r in rows[m] if r["device"] == device])) for m in METHODS}
+    secs = [np.mean([r["train_seconds"] for r in rows[m] if r["device"] == device]) for m in METHODS]
+    return " / ".join(f"{t:.0f}" for t in secs) + f" ({device})"
 
 
 def report(args: argparse.Namespace) -> list[str]:
@@ -860,13 +862,12 @@ def report(args: argparse.Namespace) -> list[str]:
             picked = {m: chosen_setting(tables[m]) for m in METHODS}
             rows = {m: tables[m][picked[m]] for m in METHODS}
             test = {m: [r["psnr"] for r in rows[m]] for m in METHODS}
-            timed_on, secs = comparable_seconds(rows)
             device = "/".join(sorted({r["device"] for m in METHODS for r in rows[m]}))
             cells = [f"`{picked[m]}`, {fmt(test[m], 2)} ({len(test[m])})" for m in METHODS]
             gap = np.mean(test["fourierf-vm"]) - np.mean(test["tensorf-vm"])
             summary.append(
                 f"| {scene} | {name} | {device} | {cells[0]} | {cells[1]} | **{gap:+.2f}** | "
-                f"{secs['fourierf-vm']:.0f} / {secs['tensorf-vm']:.0f} ({timed_on}) |"
+                f"{comparable_seconds(rows)} |"
             )
             for s in SETTINGS[scene]:
                 vals = [val_cell(tables[m][s]) if s in tables[m] else "—" for m in METHODS]

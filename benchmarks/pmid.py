@@ -163,8 +163,8 @@ GRIDS = (
         "both leave a hole where the left track should be in r_56. tensorf-vm "
         "hangs a detached lump of density beside the bucket in both views and fills the hole and the cab with dark, "
         "near patches in depth (density floating in front of the object) where fourierf-vm's depth holds a few "
-        "specks; the rest (baseplate, bucket) is one layer in both. The seed's 2.3 dB test gap is floaters, the "
-        "failure the curriculum is for.",
+        "specks; the rest (baseplate, bucket) is one layer in both. On these two views, the seed's largest "
+        "gaps, the difference is floaters, the failure the curriculum is for.",
         "What the gap looks like at P-HIGH, the worst seed for TensoRF",
         "lego",
         "test views r_56 and r_152",

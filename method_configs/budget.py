@@ -36,12 +36,11 @@ fourierf-vm TV 4 22.57, tensorf-vm TV 6 22.45). TensoRF's need for TV 6 there fo
 not its iteration count: at P-CPU's sizes and 3000 iterations on the random background tensorf-vm read 23.58 at TV 4
 against 23.11 at TV 6 (one seed), so the rule, a function of the iteration count, keeps TV 4 for both. At P-HIGH
 (400×400, 128³ -> 300³, 3000 iterations, TV searched on one seed) TensoRF wanted still more (val TV 6 21.32, 8 21.40, 10
-21.47, 12 21.33) and stayed below fourierf-vm at TV 4 (22.37, TV 8 22.35; over 3 seeds test 22.30 against 21.10). On
-P-MID's 200×200 images with that 300³ grid (pmid300, 3 seeds) both wanted about twice the TV (fourierf-vm TV 8 23.03
-against TV 6 22.83; tensorf-vm TV 12 22.51 against TV 10 22.30). So from 192³ (TV 6 on 200×200) to 300³ TensoRF's TV
-need grows at both image sizes (TV 10 on 400×400, 12 on 200×200), FourieRF's only where the grid is much finer than the
-images (300³ on 200×200): no rule of the grid's size fits both, and the rule, a function of the iteration count, keeps
-TV 4 (the CPU sizing caps the grid at 192³)."""
+21.47, 12 21.33) and stayed below fourierf-vm at TV 4 (22.37, TV 8 22.35); over 3 seeds TensoRF's choice moved to TV
+12 (val 21.95, test 21.70) and fourierf-vm's to TV 8 (22.43, 22.43; TV 4 22.39, 22.30). On P-MID's 200×200 images
+with that 300³ grid (pmid300, 3 seeds) both wanted about twice the TV too (fourierf-vm TV 8 23.03 against TV 6 22.83;
+tensorf-vm TV 12 22.51 against TV 10 22.30). So from 192³ to 300³ both methods' TV need about doubles at both image
+sizes; the rule, a function of the iteration count, keeps TV 4 because the CPU sizing caps the grid at 192³."""
 
 OBJECT_COMPONENTS = (8, 24)
 """Object scenes, both methods: density and appearance components per plane/line group, half TensoRF's (16, 48). Chosen

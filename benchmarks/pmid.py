@@ -157,17 +157,19 @@ GRIDS = (
     Grid(
         "docs/lego_grid_phigh_seed2.png",
         "P-HIGH runs of seed 2, where tensorf-vm at its one-seed choice fell furthest: fourierf-vm "
-        "`wd0-nodecay-lr0.04-tv4-comp8-bgwarm` (val / test 22.23 / 22.00; session 36), tensorf-vm "
-        "`wd0-nodecay-lr0.04-tv10-bgwarm` (20.64 / 19.75; session 36) and `wd0-nodecay-lr0.04-tv12-bgwarm` (21.88 / "
-        "21.45, its three-seed val choice; session 37); `--view-names r_56 r_152`, the two test views with TV 10's "
-        "largest gaps (4.1 and 4.5 dB; at TV 12 18.54 -> 22.76 and 20.05 -> 24.72, level with fourierf-vm's 22.67 and "
-        "24.50)",
-        ("fourierf-vm TV 4", "tensorf-vm TV 10", "tensorf-vm TV 12"),
-        "all three leave a hole where the left track should be in r_56. At TV 10 tensorf-vm "
+        "`wd0-nodecay-lr0.04-tv4-comp8-bgwarm` (val / test 22.23 / 22.00; session 36) and `...-tv8-comp8-bgwarm` "
+        "(22.50 / 22.57, its three-seed val choice; session 37), tensorf-vm `wd0-nodecay-lr0.04-tv10-bgwarm` (20.64 / "
+        "19.75; session 36) and `...-tv12-bgwarm` (21.88 / 21.45, its three-seed val choice; session 37); "
+        "`--view-names r_56 r_152`, the two test views with the largest gaps at the one-seed choices (4.1 and 4.5 dB); "
+        "there fourierf-vm TV 4, TV 8 read 22.67, 24.37 and 24.50, 26.01 dB, tensorf-vm TV 10, TV 12 18.54, 22.76 and "
+        "20.05, 24.72",
+        ("fourierf-vm TV 4", "fourierf-vm TV 8", "tensorf-vm TV 10", "tensorf-vm TV 12"),
+        "all four leave a hole where the left track should be in r_56. At TV 10 tensorf-vm "
         "hangs a detached lump of density beside the bucket in both views and fills the hole and the cab with dark, "
-        "near patches in depth (density floating in front of the object); at TV 12 the lump is a speck and the near "
-        "patches are about as few as fourierf-vm's. On these two views the floaters were a TV weight too weak for "
-        "this seed, which a TV searched on three seeds removes.",
+        "near patches in depth (density floating in front of the object); at TV 12 the lump is a speck and fewer "
+        "near patches remain (two over the tracks in r_152), about as many as fourierf-vm's at TV 4; fourierf-vm at "
+        "TV 8 shows none in either view. On these two views a stronger TV removes most of TensoRF's floaters and all "
+        "of FourieRF's.",
         "What the gap looks like at P-HIGH: seed 2, TensoRF at TV 10 and 12",
         "lego",
         "test views r_56 and r_152",

@@ -21,8 +21,8 @@ protocol to 300³ at 800×800: neither fits a CPU's 20 minutes, and at 200×200 
 voxels along each axis than the images have pixels across the scene.
 P-HIGH (session 32) goes one step toward the paper's Blender protocol where a CPU still can: lego at the shared data's
 full 400×400 with the paper's grids (128³ → 300³), at P-MID's iterations and rays; 40-75 minutes a run with its
-evaluation, two at a time with one thread each: TV searched on one seed, each choice and its nearest rival then on
-three (sessions 36, 37).
+evaluation, two at a time with one thread each: TV searched on one seed, each choice and its stronger neighbours
+then on three (sessions 36-38).
 ``pmid300`` (sessions 33-35) is P-HIGH's grids on P-MID's images, the 300³ final grid the issue's example P-MID names
 (41-58 minutes of training a run here, 3.5 on an H100 four at a time, so three seeds): which of P-HIGH's two changes
 opens the curriculum's edge.
@@ -159,7 +159,8 @@ GRIDS = (
         "P-HIGH runs of seed 2, where tensorf-vm at its one-seed choice fell furthest: fourierf-vm "
         "`wd0-nodecay-lr0.04-tv4-comp8-bgwarm` (val / test 22.23 / 22.00; session 36) and `...-tv8-comp8-bgwarm` "
         "(22.50 / 22.57, its three-seed val choice; session 37), tensorf-vm `wd0-nodecay-lr0.04-tv10-bgwarm` (20.64 / "
-        "19.75; session 36) and `...-tv12-bgwarm` (21.88 / 21.45, its three-seed val choice; session 37); "
+        "19.75; session 36) and `...-tv12-bgwarm` (21.88 / 21.45, its three-seed val choice in session 37; TV 14, "
+        "the choice since session 38, is not in the grid: 22.40 / 22.10, r_56 and r_152 23.73 and 26.17 dB); "
         "`--view-names r_56 r_152`, the two test views with the largest gaps at the one-seed choices (4.1 and 4.5 dB); "
         "there fourierf-vm TV 4, TV 8 read 22.67, 24.37 and 24.50, 26.01 dB, tensorf-vm TV 10, TV 12 18.54, 22.76 and "
         "20.05, 24.72",
@@ -436,6 +437,7 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # Session 32: TensoRF's TV need at P-HIGH's image and grid (TV 6 won at P-MID's, TV 4 at P-CPU's).
         # Session 33: TV 14, past TV 10 where TensoRF's val still rose, on the same 300³ grid (pmid300). Session 35:
         # TV 12 at P-HIGH (its val rose to TV 10 there), with fourierf-vm's TV 8 below, so both searches are two-sided.
+        # Session 38: TV 14 at P-HIGH on three seeds (TV 12, the three-seed choice, was the top); it won (22.10).
         **{
             f"wd0-nodecay-lr0.04-tv{tv}-bgwarm": [*RULE_LEGO, *tv_weights(float(tv)), *RANDOM_AFTER_UPDATE]
             for tv in (8, 10, 12, 14)

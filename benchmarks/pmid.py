@@ -159,19 +159,18 @@ GRIDS = (
         "P-HIGH runs of seed 2, where tensorf-vm at its one-seed choice fell furthest: fourierf-vm "
         "`wd0-nodecay-lr0.04-tv4-comp8-bgwarm` (val / test 22.23 / 22.00; session 36) and `...-tv8-comp8-bgwarm` "
         "(22.50 / 22.57, its three-seed val choice; session 37), tensorf-vm `wd0-nodecay-lr0.04-tv10-bgwarm` (20.64 / "
-        "19.75; session 36) and `...-tv12-bgwarm` (21.88 / 21.45, its three-seed val choice in session 37; TV 14, "
-        "the choice since session 38, is not in the grid: 22.40 / 22.10, r_56 and r_152 23.73 and 26.17 dB); "
-        "`--view-names r_56 r_152`, the two test views with the largest gaps at the one-seed choices (4.1 and 4.5 dB); "
-        "there fourierf-vm TV 4, TV 8 read 22.67, 24.37 and 24.50, 26.01 dB, tensorf-vm TV 10, TV 12 18.54, 22.76 and "
-        "20.05, 24.72",
-        ("fourierf-vm TV 4", "fourierf-vm TV 8", "tensorf-vm TV 10", "tensorf-vm TV 12"),
-        "all four leave a hole where the left track should be in r_56. At TV 10 tensorf-vm "
+        "19.75; session 36), `...-tv12-bgwarm` (21.88 / 21.45; session 37) and `...-tv14-bgwarm` (22.40 / 22.10, its "
+        "three-seed val choice; session 38); `--view-names r_56 r_152`, the two test views with the largest gaps at "
+        "the one-seed choices (4.1 and 4.5 dB); there fourierf-vm TV 4, TV 8 read 22.67, 24.37 and 24.50, 26.01 dB, "
+        "tensorf-vm TV 10, TV 12, TV 14 18.54, 22.76, 23.73 and 20.05, 24.72, 26.17",
+        ("fourierf-vm TV 4", "fourierf-vm TV 8", "tensorf-vm TV 10", "tensorf-vm TV 12", "tensorf-vm TV 14"),
+        "all five leave a hole where the left track should be in r_56. At TV 10 tensorf-vm "
         "hangs a detached lump of density beside the bucket in both views and fills the hole and the cab with dark, "
         "near patches in depth (density floating in front of the object); at TV 12 the lump is a speck and fewer "
-        "near patches remain (two over the tracks in r_152), about as many as fourierf-vm's at TV 4; fourierf-vm at "
-        "TV 8 shows none in either view. On these two views a stronger TV removes most of TensoRF's floaters and all "
-        "of FourieRF's.",
-        "What the gap looks like at P-HIGH: seed 2, TensoRF at TV 10 and 12",
+        "near patches remain (two over the tracks in r_152), about as many as fourierf-vm's at TV 4; at TV 14 "
+        "tensorf-vm, like fourierf-vm at TV 8, shows no lump and no near patch in either view. On these two views a "
+        "strong enough TV removes the floaters of both methods; fourierf-vm needs about half TensoRF's TV for it.",
+        "What the gap looks like at P-HIGH: seed 2, TensoRF at TV 10, 12 and 14",
         "lego",
         "test views r_56 and r_152",
     ),

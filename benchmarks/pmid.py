@@ -21,8 +21,8 @@ protocol to 300³ at 800×800: neither fits a CPU's 20 minutes, and at 200×200 
 voxels along each axis than the images have pixels across the scene.
 P-HIGH (session 32) goes one step toward the paper's Blender protocol where a CPU still can: lego at the shared data's
 full 400×400 with the paper's grids (128³ → 300³), at P-MID's iterations and rays; 40-75 minutes a run with its
-evaluation, two at a time with one thread each: TV searched on one seed, each choice and its stronger neighbours
-then on three (sessions 36-38).
+evaluation, two at a time with one thread each: TV searched on one seed, each choice and the stronger TVs next
+to it on three (sessions 36-38; fourierf-vm's TV 12 on one).
 ``pmid300`` (sessions 33-35) is P-HIGH's grids on P-MID's images, the 300³ final grid the issue's example P-MID names
 (41-58 minutes of training a run here, 3.5 on an H100 four at a time, so three seeds): which of P-HIGH's two changes
 opens the curriculum's edge.

@@ -48,11 +48,14 @@ def test_settings_run_on_every_seed_are_chosen_by_their_mean_val(pmid: ModuleTyp
         _row("steady", first, val=22.4, test=10.0),
         *[_row("steady", seed, val=22.4, test=10.0) for seed in later],
         _row("one-seed", first, val=23.0, test=30.0),  # not run on every seed: out of the mean's race
+        _row("two-seeds", first, val=23.0, test=30.0),
+        _row("two-seeds", later[0], val=24.0, test=30.0),  # best mean of those run, but not on every seed
     ]
     groups = pmid.rows_by({r["key"]: r for r in rows}, "lego", "pcpu", "fourierf-vm")
     assert pmid.chosen_setting(groups) == "steady"
     assert pmid.val_cell(groups["lucky"]) == "22.60 (seeds: 22.20)"
     assert pmid.val_cell(groups["one-seed"]) == "23.00"
+    assert pmid.val_cell(groups["two-seeds"]) == f"23.00 (seeds {first}, {later[0]}: 23.50)"
 
 
 def test_plans_skip_curriculum_settings_for_tensorf_and_keep_only(pmid: ModuleType) -> None:

@@ -158,7 +158,8 @@ GRIDS = (
         "docs/lego_grid_phigh_seed2.png",
         "P-HIGH runs of seed 2, where tensorf-vm at its one-seed choice fell furthest: fourierf-vm "
         "`wd0-nodecay-lr0.04-tv4-comp8-bgwarm` (val / test 22.23 / 22.00; session 36) and `...-tv8-comp8-bgwarm` "
-        "(22.50 / 22.57, its three-seed val choice; session 37), tensorf-vm `wd0-nodecay-lr0.04-tv10-bgwarm` (20.64 / "
+        "(22.50 / 22.57, session 37; level over three seeds with TV 12, the val choice by 0.01 dB since session 39), "
+        "tensorf-vm `wd0-nodecay-lr0.04-tv10-bgwarm` (20.64 / "
         "19.75; session 36), `...-tv12-bgwarm` (21.88 / 21.45; session 37) and `...-tv14-bgwarm` (22.40 / 22.10, its "
         "three-seed val choice; session 38); `--view-names r_56 r_152`, the two test views with the largest gaps at "
         "the one-seed choices (4.1 and 4.5 dB); there fourierf-vm TV 4, TV 8 read 22.67, 24.37 and 24.50, 26.01 dB, "

@@ -159,9 +159,9 @@ GRIDS = (
         "P-HIGH runs of seed 2, where tensorf-vm at its one-seed choice fell furthest: fourierf-vm "
         "`wd0-nodecay-lr0.04-tv4-comp8-bgwarm` (val / test 22.23 / 22.00; session 36) and `...-tv8-comp8-bgwarm` "
         "(22.50 / 22.57, session 37; level over three seeds with TV 12, the val choice by 0.01 dB since session 39), "
-        "tensorf-vm `wd0-nodecay-lr0.04-tv10-bgwarm` (20.64 / "
-        "19.75; session 36), `...-tv12-bgwarm` (21.88 / 21.45; session 37) and `...-tv14-bgwarm` (22.40 / 22.10, its "
-        "three-seed val choice; session 38); `--view-names r_56 r_152`, the two test views with the largest gaps at "
+        "tensorf-vm `wd0-nodecay-lr0.04-tv10-bgwarm` (20.64 / 19.75; session 36), `...-tv12-bgwarm` (21.88 / 21.45; "
+        "session 37) and `...-tv14-bgwarm` (22.40 / 22.10, its three-seed val choice; session 38); "
+        "`--view-names r_56 r_152`, the two test views with the largest gaps at "
         "the one-seed choices (4.1 and 4.5 dB); there fourierf-vm TV 4, TV 8 read 22.67, 24.37 and 24.50, 26.01 dB, "
         "tensorf-vm TV 10, TV 12, TV 14 18.54, 22.76, 23.73 and 20.05, 24.72, 26.17",
         ("fourierf-vm TV 4", "fourierf-vm TV 8", "tensorf-vm TV 10", "tensorf-vm TV 12", "tensorf-vm TV 14"),
@@ -438,7 +438,8 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # Session 33: TV 14, past TV 10 where TensoRF's val still rose, on the same 300³ grid (pmid300). Session 35:
         # TV 12 at P-HIGH (its val rose to TV 10 there), with fourierf-vm's TV 8 below, so both searches are two-sided.
         # Session 38: TV 14 at P-HIGH on three seeds (TV 12, the three-seed choice, was the top); it won (22.10).
-        # Session 39: TV 16, as TV 14 was again the top tried and TensoRF's three-seed val still rose.
+        # Session 39: TV 16, as TV 14 was again the top tried and TensoRF's three-seed val still rose; it lost on both
+        # seeds it ran (21.07, 21.83 against TV 14's 21.33, 22.57), so TV 14 is the peak.
         **{
             f"wd0-nodecay-lr0.04-tv{tv}-bgwarm": [*RULE_LEGO, *tv_weights(float(tv)), *RANDOM_AFTER_UPDATE]
             for tv in (8, 10, 12, 14, 16)
@@ -654,29 +655,31 @@ def chosen_setting(groups: dict[str, list[dict]]) -> str | None:
     Why the mean where there is one: one seed's val PSNR moves by about 0.15 dB from seed to seed, so the best of
     many single-seed settings is mostly the luckiest (lego P-CPU: four settings within 0.03 dB of each other over
     three seeds spanned 22.37-22.58 on the first)."""
-    seeded = {
-        s: [r["val_psnr"] for r in rows if r["seed"] in SEEDS]
-        for s, rows in groups.items()
-        if {r["seed"] for r in rows} >= set(SEEDS)
-    }
+    seeded = {s: vals for s, rows in groups.items() if len(vals := val_by_seed(rows)) == len(SEEDS)}
     if seeded:
-        return max(seeded, key=lambda s: float(np.mean(seeded[s])))
+        return max(seeded, key=lambda s: float(np.mean(list(seeded[s].values()))))
     first = {s: [r for r in rows if r["seed"] == SEEDS[0]] for s, rows in groups.items()}
     scored = {s: rows[0]["val_psnr"] for s, rows in first.items() if rows}
     return max(scored, key=scored.__getitem__) if scored else None
 
 
+def val_by_seed(rows: list[dict]) -> dict[int, float]:
+    """A setting's val PSNR per seed of ``SEEDS`` that it ran on, in ``SEEDS``' order (one row per seed: the key
+    names it)."""
+    recorded = {r["seed"]: r["val_psnr"] for r in rows}
+    return {seed: recorded[seed] for seed in SEEDS if seed in recorded}
+
+
 def val_cell(rows: list[dict]) -> str:
     """A setting's val PSNR for the sweep table: the first seed's, and the mean over every seed where all were run,
     else over the seeds that were (named, as such a mean does not take part in the choice)."""
-    first_seed = [r["val_psnr"] for r in rows if r["seed"] == SEEDS[0]]
-    first = fmt(first_seed, 2) if first_seed else "—"
-    run = [seed for seed in SEEDS if seed in {r["seed"] for r in rows}]
-    mean = np.mean([r["val_psnr"] for r in rows if r["seed"] in SEEDS]) if run else None
-    if len(run) == len(SEEDS):
+    vals = val_by_seed(rows)
+    first = f"{vals[SEEDS[0]]:.2f}" if SEEDS[0] in vals else "—"
+    mean = float(np.mean(list(vals.values()))) if vals else 0.0
+    if len(vals) == len(SEEDS):
         return f"{first} (seeds: {mean:.2f})"
-    if len(run) > 1:
-        return f"{first} (seeds {', '.join(map(str, run))}: {mean:.2f})"
+    if len(vals) > 1:
+        return f"{first} (seeds {', '.join(map(str, vals))}: {mean:.2f})"
     return first
 
 

@@ -446,11 +446,14 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         },
         # fourierf-vm TV steps above its TV 4 (its val choice at every size up to P-MID), on the 300³ grid; session 34:
         # TV 8 and tensorf-vm's TV 12, as TV 6 (fourierf-vm's best) was the top of its tried range; TV 10 and 12, as
-        # TV 8 (val 23.03 over three seeds, TV 6 22.83) was again the top.
+        # TV 8 (val 23.03 over three seeds, TV 6 22.83) was again the top. Session 40: tensorf-vm's P-HIGH choice
+        # (TV 14) on the object rule's half components, which its P-HIGH search had left at TensoRF's 16 / 48 while
+        # fourierf-vm's ran on 8 / 24 (and fourierf-vm's TV 12 on 16 / 48 above): seed 20211202 val 22.59 against
+        # 21.33 on 16 / 48 (fourierf-vm 22.57 against 22.45).
         **{
             f"wd0-nodecay-lr0.04-tv{tv}-comp8-bgwarm": [
                 *RULE_LEGO, *tv_weights(float(tv)), *components(8, 24), *RANDOM_AFTER_UPDATE]
-            for tv in (6, 8, 10, 12)
+            for tv in (6, 8, 10, 12, 14)
         },
         # tensorf-vm's P-MID choice (TV 6) with the same random background and no L1: does TensoRF, which overfits
         # more at P-MID, gain from it there (it lost at P-CPU: 22.80 -> 22.13)?

@@ -51,7 +51,7 @@ import argparse
 import json
 import sys
 import threading
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -586,23 +586,21 @@ def execute(run: Run, scene: str, args: argparse.Namespace) -> dict:
     protocol = PROTOCOLS[protocol_name]
     # --budget-rule False: each run has exactly its setting's values, not the short-run rule's (method_configs.budget)
     extra = [*protocol.flags(), "--device", args.device, "--budget-rule", "False", *SETTINGS[scene][setting]]
-    if args.threads:
-        extra += ["--threads", str(args.threads)]
     if args.stage == "curve":  # keep a checkpoint every CURVE_EVERY iterations (the later flag wins)
         extra += ["--steps-per-save", str(CURVE_EVERY), "--keep-checkpoints", str(run.iters // CURVE_EVERY + 1)]
     data = args.data / ("blender/lego" if scene == "lego" else "llff/fern")
     lpips, work = args.lpips, args.work / scene
-    row = train_and_eval(run, data, parser_args(scene, protocol), work, lpips, scene, extra)
-    row |= evaluate(Path(row["run_dir"]), run.key, work, lpips, split="val")
+    row = train_and_eval(run, data, parser_args(scene, protocol), work, lpips, scene, extra, args.threads)
+    row |= evaluate(Path(row["run_dir"]), run.key, work, lpips, split="val", threads=args.threads)
     if args.stage == "curve":
         row["curve"] = [
-            *curve_points(Path(row["run_dir"]), run, work, lpips),
+            *curve_points(Path(row["run_dir"]), run, work, lpips, args.threads),
             [run.iters, row["val_psnr"], row["psnr"]],
         ]
     return row | {"scene": scene, "protocol": protocol_name, "setting": setting, "device": args.device}
 
 
-def curve_points(run_dir: Path, run: Run, work: Path, lpips: Path) -> list[list[float]]:
+def curve_points(run_dir: Path, run: Run, work: Path, lpips: Path, threads: int | None) -> list[list[float]]:
     """[step, val PSNR, test PSNR] of every checkpoint before the last (the row itself holds the last)."""
     points = []
     for ckpt in sorted((run_dir / "checkpoints").glob("step-*.ckpt")):
@@ -610,8 +608,8 @@ def curve_points(run_dir: Path, run: Run, work: Path, lpips: Path) -> list[list[
         if step >= run.iters:
             continue
         key = f"{run.key}.step{step}"
-        val = evaluate(run_dir, key, work, lpips, split="val", checkpoint=ckpt)["val_psnr"]
-        points.append([step, val, evaluate(run_dir, key, work, lpips, checkpoint=ckpt)["psnr"]])
+        val = evaluate(run_dir, key, work, lpips, split="val", checkpoint=ckpt, threads=threads)["val_psnr"]
+        points.append([step, val, evaluate(run_dir, key, work, lpips, checkpoint=ckpt, threads=threads)["psnr"]])
     return points
 
 
@@ -873,6 +871,14 @@ def comparable_seconds(rows: dict[str, list[dict]]) -> str:
     return " / ".join(f"{t:.0f}" for t in secs) + f" ({device})"
 
 
+def recording_machines(rows: Iterable[dict]) -> str:
+    """Where the rows ran: they span many sessions' machines, so the machine that writes the report says nothing of
+    them. Rows record their CPU since session 41; older ones do not."""
+    named = sorted({r["machine"] for r in rows if "machine" in r})
+    since = f"; rows that record theirs: {'; '.join(named)}" if named else ""
+    return f"each session's own (2-core CPUs, torch 2.13.0+cpu; an H100 where the device is cuda){since}"
+
+
 def report(args: argparse.Namespace) -> list[str]:
     results = load_results(args.results)
     body = section_head(
@@ -883,6 +889,7 @@ def report(args: argparse.Namespace) -> list[str]:
         f"{SEEDS[0]}); test PSNR of that setting only, mean ± std over the seeds run. PSNRs agree across "
         "devices up to float rounding and random streams. Training seconds are the device's and were taken while other "
         "work shared the machine: they are no speed measurement (the speed benchmarks are the interleaved ones).",
+        machine=recording_machines(results.values()),
     )
     summary = [
         "| scene | protocol | device | fourierf-vm: setting, test PSNR (seeds) | tensorf-vm: setting, test PSNR (seeds)"
@@ -962,7 +969,7 @@ def main() -> None:
     ap.add_argument("--seeds", nargs="+", type=int, choices=SEEDS[1:], default=None,
                     help="the seeds stage runs only these of the later seeds (default: all)")  # fmt: skip
     ap.add_argument("--jobs", type=int, default=1, help="trainings at once")
-    ap.add_argument("--threads", type=int, default=None, help="CPU threads per training")
+    ap.add_argument("--threads", type=int, default=None, help="CPU threads per training and its evaluations")
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")
     args = ap.parse_args()
     if args.protocol is None:

@@ -42,9 +42,17 @@ class Run:
 
 
 def train_and_eval(
-    run: Run, data: Path, parser_args: Sequence[str], work: Path, lpips: Path, scene: str, extra: Sequence[str] = ()
+    run: Run,
+    data: Path,
+    parser_args: Sequence[str],
+    work: Path,
+    lpips: Path,
+    scene: str,
+    extra: Sequence[str] = (),
+    threads: int | None = None,
 ) -> dict:
-    """Train one run, evaluate it on the test split, and return its result row."""
+    """Train one run, evaluate it on the test split, and return its result row. ``threads`` caps torch's CPU threads
+    in both steps, so that jobs run side by side do not oversubscribe the cores during evaluation either."""
     out_dir = work / "runs"
     run_dir = out_dir / scene / run.method / run.key
     # The harness owns its work folder: a run interrupted earlier left this directory without a result, and a new
@@ -54,7 +62,7 @@ def train_and_eval(
     train_cmd = [
         str(BIN / "fourierf-train"), run.method, "--data", str(data), "--output-dir", str(out_dir),
         "--timestamp", run.key, "--seed", str(run.seed), "--max-num-iterations", str(run.iters),
-        *GRID_FLAGS, *extra, *parser_args,
+        *GRID_FLAGS, *extra, *thread_flags(threads), *parser_args,
     ]  # fmt: skip
     train_s, train_rss, code = run_timed(train_cmd, work / f"{run.key}.train.log")
     if code != 0:
@@ -63,13 +71,24 @@ def train_and_eval(
     row = {
         "key": run.key, "method": run.method, "iters": run.iters, "seed": run.seed, "views": run.views,
         "train_view_ids": views["train_view_ids"], "train_seconds": train_s, "train_peak_rss_gb": train_rss,
-        "run_dir": str(run_dir),
+        "run_dir": str(run_dir), "machine": cpu_and_cores(),
     }  # fmt: skip
-    return row | evaluate(run_dir, run.key, work, lpips)
+    return row | evaluate(run_dir, run.key, work, lpips, threads=threads)
+
+
+def thread_flags(threads: int | None) -> list[str]:
+    """``--threads N`` for the train and eval scripts, or nothing (torch's default: every core it sees)."""
+    return [] if threads is None else ["--threads", str(threads)]
 
 
 def evaluate(
-    run_dir: Path, key: str, work: Path, lpips: Path, split: str = "test", checkpoint: Path | None = None
+    run_dir: Path,
+    key: str,
+    work: Path,
+    lpips: Path,
+    split: str = "test",
+    checkpoint: Path | None = None,
+    threads: int | None = None,
 ) -> dict:
     """Evaluate a trained run on one split, at its latest checkpoint or ``checkpoint``: metrics and timings for its
     result row (val keys prefixed ``val_``)."""
@@ -78,7 +97,7 @@ def evaluate(
     eval_cmd = [
         str(BIN / "fourierf-eval"), "--load-config", str(run_dir / "config.json"), "--output-path", str(eval_json),
         "--lpips-weights", str(lpips), "--split", split,
-        *(["--checkpoint", str(checkpoint)] if checkpoint is not None else []),
+        *(["--checkpoint", str(checkpoint)] if checkpoint is not None else []), *thread_flags(threads),
     ]  # fmt: skip
     eval_s, _, code = run_timed(eval_cmd, work / f"{key}{tag}.eval.log")
     if code != 0:
@@ -171,12 +190,13 @@ def update_benchmarks_md(path: Path, begin: str, end: str, body: list[str]) -> s
     return section
 
 
-def section_head(title: str, command: str, settings: str | None = None) -> list[str]:
-    """The opening lines every BENCHMARKS.md section shares: title, machine and command, what was run."""
+def section_head(title: str, command: str, settings: str | None = None, machine: str | None = None) -> list[str]:
+    """The opening lines every BENCHMARKS.md section shares: title, machine and command, what was run. ``machine``
+    replaces this machine's description where the rows were recorded elsewhere (over many sessions)."""
     return [
         f"## {title}",
         "",
-        f"Machine: {machine_description()}. Command: `{command}`.",
+        f"Machine: {machine or machine_description()}. Command: `{command}`.",
         *([settings] if settings else []),
         "",
     ]
@@ -185,6 +205,11 @@ def section_head(title: str, command: str, settings: str | None = None) -> list[
 def machine_description() -> str:
     import torch
 
+    return f"{cpu_and_cores()}, torch {torch.__version__}, {torch.get_num_threads()} threads"
+
+
+def cpu_and_cores() -> str:
+    """This machine's CPU model and core count: what a result row records of where it ran."""
     cpu = platform.processor() or platform.machine()
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -193,4 +218,4 @@ def machine_description() -> str:
                 break
     except OSError:
         pass
-    return f"{cpu}, {os.cpu_count()} cores, torch {torch.__version__}, {torch.get_num_threads()} threads"
+    return f"{cpu}, {os.cpu_count()} cores"

@@ -240,3 +240,11 @@ def test_training_seconds_are_compared_on_one_device_both_methods_ran_on(pmid: M
     assert pmid.comparable_seconds(rows) == "212 / 232 (cuda)"
     rows["tensorf-vm"] = [run("cpu", 2986.0)]
     assert pmid.comparable_seconds(rows) == "— (no shared device)"  # no mixed mean
+
+
+def test_the_machine_line_names_the_rows_machines_not_the_reporters(pmid: ModuleType) -> None:
+    rows = [_row("wd0", 1, 22.0, 22.0), _row("wd0", 2, 22.0, 22.0) | {"machine": "CPU A, 2 cores"}]
+    rows.append(_row("wd0", 3, 22.0, 22.0) | {"machine": "CPU A, 2 cores"})
+    line = pmid.recording_machines(rows)
+    assert line.count("CPU A, 2 cores") == 1 and "each session's own" in line
+    assert "record theirs" not in pmid.recording_machines(rows[:1])

@@ -1,0 +1,54 @@
+"""fourierf_plugin.bench.protocol with the child processes faked: ``threads`` reaches both the training and every
+evaluation, so jobs run side by side never oversubscribe the cores (an evaluation without it takes every core)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from fourierf_plugin.bench import protocol
+
+
+@pytest.fixture
+def commands(monkeypatch: pytest.MonkeyPatch) -> list[list[str]]:
+    """Every command the harness launches; training writes views.json, evaluation its eval.json."""
+    launched: list[list[str]] = []
+
+    def fake_run_timed(cmd: list[str], log: Path) -> tuple[float, float, int]:
+        launched.append(cmd)
+        if cmd[0].endswith("fourierf-train"):
+            run_dir = Path(cmd[cmd.index("--output-dir") + 1]) / "lego" / cmd[1] / cmd[cmd.index("--timestamp") + 1]
+            run_dir.mkdir(parents=True)
+            (run_dir / "views.json").write_text(json.dumps({"train_view_ids": [0, 1]}))
+        else:
+            report = {
+                "results": {"psnr": 20.0, "ssim": 0.8, "lpips": 0.1}, "num_views": 2, "view_ids": [2, 3],
+                "timings": {"render_seconds_total": 1.0},
+            }  # fmt: skip
+            Path(cmd[cmd.index("--output-path") + 1]).write_text(json.dumps(report))
+        return 1.0, 0.5, 0
+
+    monkeypatch.setattr(protocol, "run_timed", fake_run_timed)
+    return launched
+
+
+def _threads(cmd: list[str]) -> str | None:
+    return cmd[cmd.index("--threads") + 1] if "--threads" in cmd else None
+
+
+def test_threads_reach_the_training_and_every_evaluation(commands: list[list[str]], tmp_path: Path) -> None:
+    run = protocol.Run("fourierf-vm", 10, 1, "tiny")
+    row = protocol.train_and_eval(run, tmp_path / "data", ["blender-data"], tmp_path, tmp_path / "w.pth", "lego",
+                                  threads=1)  # fmt: skip
+    row |= protocol.evaluate(Path(row["run_dir"]), run.key, tmp_path, tmp_path / "w.pth", split="val", threads=1)
+    assert [_threads(c) for c in commands] == ["1", "1", "1"]
+    assert (row["psnr"], row["val_psnr"], row["val_view_ids"]) == (20.0, 20.0, [2, 3])
+    assert row["machine"] == protocol.cpu_and_cores()  # rows span sessions: each says where it ran
+
+
+def test_without_threads_no_flag_is_passed(commands: list[list[str]], tmp_path: Path) -> None:
+    run = protocol.Run("tensorf-vm", 10, 1, "tiny")
+    protocol.train_and_eval(run, tmp_path / "data", ["blender-data"], tmp_path, tmp_path / "w.pth", "lego")
+    assert [_threads(c) for c in commands] == [None, None]

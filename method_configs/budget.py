@@ -35,14 +35,16 @@ TV 1 21.97, 2 22.44, 4 22.48, 6 22.05; tensorf-vm TV 1 20.38, 4 21.74, 6 22.22, 
 22.57, tensorf-vm TV 6 22.45). TensoRF's need for TV 6 there follows P-MID's finer images and grid, not its iteration
 count: at P-CPU's sizes and 3000 iterations on the random background tensorf-vm read 23.58 at TV 4 against 23.11 at TV 6
 (one seed), so the rule, a function of the iteration count, keeps TV 4 for both. At P-HIGH (400×400, 128³ -> 300³, 3000
-iterations, TV searched on one seed) TensoRF wanted still more (val TV 6 21.32, 8 21.40, 10 21.47, 12 21.33) and stayed
-below fourierf-vm at TV 4 (22.37, TV 8 22.35); over 3 seeds TensoRF's choice moved to TV 14 (val 22.10, test 21.89; TV
-12 21.95, 21.70; TV 16 on two seeds 0.50 val below TV 14 on those) and fourierf-vm's to TV 12 by a hair (22.44, 22.35;
-TV 8 22.43, 22.43; TV 4 22.39, 22.30). On P-MID's 200×200 images with that 300³ grid (pmid300, 3 seeds) both wanted
-about twice the TV too (fourierf-vm TV 8 23.03 against TV 6 22.83; tensorf-vm TV 12 22.51 against TV 10 22.30). So at
-300³ both methods pick about twice their 192³ TV (measured on 200×200 only), and on 400×400 fourierf-vm about the same
-(flat from TV 4 to 12 there, 0.05 val), tensorf-vm more (TV 14 against 12 and 16); the rule, a function of the iteration
-count, keeps TV 4 because the CPU sizing caps the grid at 192³."""
+iterations, TV searched on one seed, TensoRF on its own 16 / 48 components) TensoRF wanted still more (val TV 6 21.32,
+8 21.40, 10 21.47, 12 21.33) and stayed below fourierf-vm at TV 4 (22.37, TV 8 22.35); over 3 seeds TensoRF's choice
+moved to TV 14 (val 22.10, test 21.89; TV 12 21.95, 21.70; TV 16 on two seeds 0.50 val below TV 14 on those) and
+fourierf-vm's to TV 12 by a hair (22.44, 22.35; TV 8 22.43, 22.43; TV 4 22.39, 22.30). On the rule's 8 / 24 TensoRF's
+TV 14 reads 22.40, 22.34 (3 seeds), level with fourierf-vm's TV 12 (``OBJECT_COMPONENTS``). On P-MID's 200×200
+images with that 300³ grid (pmid300, 3 seeds) both wanted about twice the TV too (fourierf-vm TV 8 23.03 against TV 6
+22.83; tensorf-vm, on 16 / 48, TV 12 22.51 against TV 10 22.30). So at 300³ both methods pick about twice their 192³
+TV (measured on 200×200 only), and on 400×400 fourierf-vm about the same (flat from TV 4 to 12 there, 0.05 val),
+tensorf-vm more (TV 14 against 12 and 16); the rule, a function of the iteration count, keeps TV 4 because the CPU
+sizing caps the grid at 192³."""
 
 OBJECT_COMPONENTS = (8, 24)
 """Object scenes, both methods: density and appearance components per plane/line group, half TensoRF's (16, 48). Chosen
@@ -50,7 +52,10 @@ on lego's val views at the rest of the object rule, mean of 3 seeds, 16 / 48 -> 
 22.59 -> 22.73, tensorf-vm 22.69 -> 22.70; 1500 iterations 22.64 -> 22.77, 22.79 -> 22.84; 3000 (P-MID) 22.57 ->
 22.55, tensorf-vm at TV 6 22.45 -> 22.34. A quarter (4 / 12) lost at 800 (22.33, 22.55, one seed). A run
 takes less time (two interleaved A/Bs of fourierf-vm at 800 iterations, 2 pairs each: 0.89x and 0.87x the run's time;
-a step at the end of the run 0.86x and 1.05x in-process, so not reliably cheaper there; BENCHMARKS.md).
+a step at the end of the run 0.86x and 1.05x in-process, so not reliably cheaper there; BENCHMARKS.md). On a 300³ grid
+they matter more, and to TensoRF (P-HIGH, lego 400×400, 3000 iterations, `--budget-rule False`): tensorf-vm at TV 14
+22.10 -> 22.40 val, 21.89 -> 22.34 test (3 seeds; its worst seed 21.06 -> 22.49 test), fourierf-vm at TV 12 22.57 ->
+22.45 val (one seed), so at equal counts the two are level there.
 Forward-facing scenes keep TensoRF's LLFF counts: half lost on fern (800 iterations, one seed: fourierf-vm
 20.24 -> 20.02, tensorf-vm 19.50 -> 18.60)."""
 

@@ -20,11 +20,12 @@ at 192). TensoRF's LLFF configuration grows to 640³ over 25k iterations at 1/4 
 protocol to 300³ at 800×800: neither fits a CPU's 20 minutes, and at 200×200 or 504×378 a 192³ grid already holds more
 voxels along each axis than the images have pixels across the scene.
 P-HIGH (session 32) goes one step toward the paper's Blender protocol where a CPU still can: lego at the shared data's
-full 400×400 with the paper's grids (128³ → 300³), at P-MID's iterations and rays; 40-75 minutes a run with its
-evaluation, two at a time with one thread each: TV searched on one seed, each choice and the stronger TVs next
-to it on three (sessions 36-39; tensorf-vm's TV 16 on two). tensorf-vm's search ran on TensoRF's 16 / 48 components
-(settings without ``comp8`` pass none, and ``--budget-rule False`` keeps the preset's), fourierf-vm's on the object
-rule's 8 / 24; tensorf-vm's TV 14 on 8 / 24 (sessions 40-41, three seeds) is its val choice, level with fourierf-vm.
+full 400×400 with the paper's grids (128³ → 300³), at P-MID's iterations and rays; 35-45 minutes of training a run,
+two at a time with one thread each (``--threads`` caps the evaluations too): TV searched on one seed, each choice
+and the stronger TVs next to it on three (sessions 36-39; tensorf-vm's TV 16 on two). tensorf-vm's search ran on
+TensoRF's 16 / 48 components (settings without ``comp8`` pass none, and ``--budget-rule False`` keeps the
+preset's), fourierf-vm's on the object rule's 8 / 24; tensorf-vm's TV 14 on 8 / 24 (sessions 40-41, three seeds) is
+its val choice, level with fourierf-vm.
 ``pmid300`` (sessions 33-35) is P-HIGH's grids on P-MID's images, the 300³ final grid the issue's example P-MID names
 (41-58 minutes of training a run here, 3.5 on an H100 four at a time, so three seeds): which of P-HIGH's two changes
 opens the curriculum's edge.
@@ -163,7 +164,7 @@ GRIDS = (
         "(22.50 / 22.57, session 37; level over three seeds with TV 12, the val choice by 0.01 dB since session 39), "
         "tensorf-vm `wd0-nodecay-lr0.04-tv10-bgwarm` (20.64 / 19.75; session 36), `...-tv12-bgwarm` (21.88 / 21.45; "
         "session 37) and `...-tv14-bgwarm` (22.40 / 22.10, the three-seed val choice on TensoRF's 16 / 48 "
-        "components; session 38; all three on 16 / 48); "
+        "components; session 38; tensorf-vm's three runs here all on 16 / 48); "
         "`--view-names r_56 r_152`, the two test views with the largest gaps at "
         "the one-seed choices (4.1 and 4.5 dB); there fourierf-vm TV 4, TV 8 read 22.67, 24.37 and 24.50, 26.01 dB, "
         "tensorf-vm TV 10, TV 12, TV 14 18.54, 22.76, 23.73 and 20.05, 24.72, 26.17",
@@ -977,6 +978,8 @@ def main() -> None:
     args = ap.parse_args()
     if args.protocol is None:
         args.protocol = ["pcpu3000"] if args.stage == "curve" else ["pcpu", "pmid", "pmid800"]
+    if args.threads is not None and args.threads < 1:
+        sys.exit(f"error: --threads {args.threads} must be at least 1; pass e.g. --threads 1, or omit it")
     if args.seeds and args.stage != "seeds":
         sys.exit(f"error: --seeds picks the later seeds of the seeds stage; drop it for the {args.stage} stage")
     known = {name for scene in args.scene for name in SETTINGS[scene]}

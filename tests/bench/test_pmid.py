@@ -248,3 +248,10 @@ def test_the_machine_line_names_the_rows_machines_not_the_reporters(pmid: Module
     line = pmid.recording_machines(rows)
     assert line.count("CPU A, 2 cores") == 1 and "each session's own" in line
     assert "record theirs" not in pmid.recording_machines(rows[:1])
+
+
+def test_threads_below_one_is_one_clear_error(tmp_path: Path) -> None:
+    done = subprocess.run([sys.executable, str(SCRIPT), "report", "--threads", "0", "--work", str(tmp_path)],
+                          capture_output=True, text=True)  # fmt: skip
+    assert done.returncode != 0 and "--threads 0 must be at least 1" in done.stderr
+    assert "Traceback" not in done.stderr

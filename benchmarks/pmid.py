@@ -28,7 +28,8 @@ preset's), fourierf-vm's on the object rule's 8 / 24; tensorf-vm's TV 14 on 8 / 
 its val choice, level with fourierf-vm.
 ``pmid300`` (sessions 33-35) is P-HIGH's grids on P-MID's images, the 300³ final grid the issue's example P-MID names
 (41-58 minutes of training a run here, 3.5 on an H100 four at a time, so three seeds): which of P-HIGH's two changes
-opens the curriculum's edge.
+opens the curriculum's edge. There too tensorf-vm's val choice is on 8 / 24 (TV 12, sessions 41-42), +0.50 dB test
+behind fourierf-vm.
 
 Settings are chosen on validation views only (lego: every 8th of Blender's val split; fern: training images no run
 trains on, 2 9 18); the test views (lego every 8th test view, fern 0 8 16) are evaluated for every run but only the
@@ -453,11 +454,13 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # TV 8 (val 23.03 over three seeds, TV 6 22.83) was again the top. Session 40: tensorf-vm's P-HIGH choice
         # (TV 14) on the object rule's half components, which its P-HIGH search had left at TensoRF's 16 / 48 while
         # fourierf-vm's ran on 8 / 24 (and fourierf-vm's TV 12 on 16 / 48 above): seed 20211202 val 22.59 against
-        # 21.33 on 16 / 48 (fourierf-vm 22.57 against 22.45).
+        # 21.33 on 16 / 48 (fourierf-vm 22.57 against 22.45). Session 42: TV 16, so tensorf-vm's P-HIGH search on 8 / 24
+        # can be two-sided (TV 12 and 16 there not run yet); on pmid300's first seed TV 10, 12, 14 on 8 / 24 read val
+        # 22.53, 22.47, 22.50, and TV 12 over three seeds 22.72 against 22.51 on 16 / 48, tensorf-vm's choice there.
         **{
             f"wd0-nodecay-lr0.04-tv{tv}-comp8-bgwarm": [
                 *RULE_LEGO, *tv_weights(float(tv)), *components(8, 24), *RANDOM_AFTER_UPDATE]
-            for tv in (6, 8, 10, 12, 14)
+            for tv in (6, 8, 10, 12, 14, 16)
         },
         # tensorf-vm's P-MID choice (TV 6) with the same random background and no L1: does TensoRF, which overfits
         # more at P-MID, gain from it there (it lost at P-CPU: 22.80 -> 22.13)?

@@ -54,8 +54,8 @@ on lego's val views at the rest of the object rule, mean of 3 seeds, 16 / 48 -> 
 takes less time (two interleaved A/Bs of fourierf-vm at 800 iterations, 2 pairs each: 0.89x and 0.87x the run's time;
 a step at the end of the run 0.86x and 1.05x in-process, so not reliably cheaper there; BENCHMARKS.md). On a 300³ grid
 they matter more, and to TensoRF (P-HIGH, lego 400×400, 3000 iterations, `--budget-rule False`): tensorf-vm at TV 14
-22.10 -> 22.40 val, 21.89 -> 22.34 test (3 seeds; its worst seed 21.06 -> 22.49 test), fourierf-vm at TV 12 22.57 ->
-22.45 val (one seed), so at equal counts the two are level there.
+22.10 -> 22.40 val, 21.89 -> 22.34 test (3 seeds; its worst seed 21.06 -> 22.49 test), fourierf-vm at TV 12 22.35 ->
+22.44 val, 22.23 -> 22.35 test (3 seeds), so at equal counts the two are level there.
 Forward-facing scenes keep TensoRF's LLFF counts: half lost on fern (800 iterations, one seed: fourierf-vm
 20.24 -> 20.02, tensorf-vm 19.50 -> 18.60)."""
 

@@ -24,8 +24,8 @@ full 400×400 with the paper's grids (128³ → 300³), at P-MID's iterations an
 two at a time with one thread each (``--threads`` caps the evaluations too): TV searched on one seed, each choice
 and the stronger TVs next to it on three (sessions 36-39; tensorf-vm's TV 16 on two). tensorf-vm's search ran on
 TensoRF's 16 / 48 components (settings without ``comp8`` pass none, and ``--budget-rule False`` keeps the
-preset's), fourierf-vm's on the object rule's 8 / 24; tensorf-vm's TV 14 on 8 / 24 (sessions 40-41, three seeds) is
-its val choice, level with fourierf-vm.
+preset's), fourierf-vm's on the object rule's 8 / 24; on 8 / 24 tensorf-vm's TV 12 (sessions 40-43: TV 10-16 on one
+seed, 12 and 14 on three) is its val choice, level with fourierf-vm.
 ``pmid300`` (sessions 33-35) is P-HIGH's grids on P-MID's images, the 300³ final grid the issue's example P-MID names
 (41-58 minutes of training a run here, 3.5 on an H100 four at a time, so three seeds): which of P-HIGH's two changes
 opens the curriculum's edge. There too tensorf-vm's val choice is on 8 / 24 (TV 12, sessions 41-42), +0.50 dB test
@@ -457,6 +457,10 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # 21.33 on 16 / 48 (fourierf-vm 22.57 against 22.45). Session 42: TV 16, so tensorf-vm's P-HIGH search on 8 / 24
         # can be two-sided (TV 12 and 16 there not run yet); on pmid300's first seed TV 10, 12, 14 on 8 / 24 read val
         # 22.53, 22.47, 22.50, and TV 12 over three seeds 22.72 against 22.51 on 16 / 48, tensorf-vm's choice there.
+        # Session 43: at P-HIGH on 8 / 24 tensorf-vm's seed 20211202 reads TV 10 22.05, 12 22.70, 14 22.59, 16 22.26,
+        # and TV 12 over three seeds 22.51 against TV 14's 22.40, its choice; fourierf-vm's TV 16 (its TV 4-12 flat)
+        # read 22.55 against TV 12's 22.45 on that seed, but 22.40 over three
+        # seeds against TV 12's 22.44, so TV 12 stays fourierf-vm's choice.
         **{
             f"wd0-nodecay-lr0.04-tv{tv}-comp8-bgwarm": [
                 *RULE_LEGO, *tv_weights(float(tv)), *components(8, 24), *RANDOM_AFTER_UPDATE]

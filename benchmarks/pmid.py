@@ -455,12 +455,12 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # (TV 14) on the object rule's half components, which its P-HIGH search had left at TensoRF's 16 / 48 while
         # fourierf-vm's ran on 8 / 24 (and fourierf-vm's TV 12 on 16 / 48 above): seed 20211202 val 22.59 against
         # 21.33 on 16 / 48 (fourierf-vm 22.57 against 22.45). Session 42: TV 16, so tensorf-vm's P-HIGH search on 8 / 24
-        # can be two-sided (TV 12 and 16 there not run yet); on pmid300's first seed TV 10, 12, 14 on 8 / 24 read val
+        # can be two-sided (run in session 43, below); on pmid300's first seed TV 10, 12, 14 on 8 / 24 read val
         # 22.53, 22.47, 22.50, and TV 12 over three seeds 22.72 against 22.51 on 16 / 48, tensorf-vm's choice there.
         # Session 43: at P-HIGH on 8 / 24 tensorf-vm's seed 20211202 reads TV 10 22.05, 12 22.70, 14 22.59, 16 22.26,
         # and TV 12 over three seeds 22.51 against TV 14's 22.40, its choice; fourierf-vm's TV 16 (its TV 4-12 flat)
-        # read 22.55 against TV 12's 22.45 on that seed, but 22.40 over three
-        # seeds against TV 12's 22.44, so TV 12 stays fourierf-vm's choice.
+        # read 22.55 against TV 12's 22.45 on that seed, but 22.40 over three seeds against TV 12's 22.44, so TV 12
+        # stays fourierf-vm's choice.
         **{
             f"wd0-nodecay-lr0.04-tv{tv}-comp8-bgwarm": [
                 *RULE_LEGO, *tv_weights(float(tv)), *components(8, 24), *RANDOM_AFTER_UPDATE]

@@ -28,8 +28,8 @@ preset's), fourierf-vm's on the object rule's 8 / 24; on 8 / 24 tensorf-vm's TV 
 seed, 12 and 14 on three) is its val choice, level with fourierf-vm.
 ``pmid300`` (sessions 33-35) is P-HIGH's grids on P-MID's images, the 300³ final grid the issue's example P-MID names
 (41-58 minutes of training a run here, 3.5 on an H100 four at a time, so three seeds): which of P-HIGH's two changes
-opens the curriculum's edge. There too tensorf-vm's val choice is on 8 / 24 (TV 12, sessions 41-42), +0.50 dB test
-behind fourierf-vm.
+opens the curriculum's edge. There too tensorf-vm's val choice is on 8 / 24 (TV 10, sessions 41-44), +0.24 dB test
+behind fourierf-vm (+0.50 while its TV 12 alone had run on three seeds).
 
 Settings are chosen on validation views only (lego: every 8th of Blender's val split; fern: training images no run
 trains on, 2 9 18); the test views (lego every 8th test view, fern 0 8 16) are evaluated for every run but only the
@@ -460,7 +460,10 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # Session 43: at P-HIGH on 8 / 24 tensorf-vm's seed 20211202 reads TV 10 22.05, 12 22.70, 14 22.59, 16 22.26,
         # and TV 12 over three seeds 22.51 against TV 14's 22.40, its choice; fourierf-vm's TV 16 (its TV 4-12 flat)
         # read 22.55 against TV 12's 22.45 on that seed, but 22.40 over three seeds against TV 12's 22.44, so TV 12
-        # stays fourierf-vm's choice.
+        # stays fourierf-vm's choice. Session 44: pmid300 tensorf-vm TV 10 and 14 on 8 / 24, seeds 1 and 2 (level with
+        # TV 12 on the first seed): val 23.22, 22.85 and 22.64, 22.87, so over three seeds TV 10 (22.87) overtakes TV 12
+        # (22.72) and TV 14 (22.67) as its choice, and the gap falls from +0.50 to +0.24 dB test.
+        # TV 8 on seeds 20211202 and 1 (val 21.11, 22.99) falls below TV 10 on both, so that search is two-sided.
         **{
             f"wd0-nodecay-lr0.04-tv{tv}-comp8-bgwarm": [
                 *RULE_LEGO, *tv_weights(float(tv)), *components(8, 24), *RANDOM_AFTER_UPDATE]

@@ -41,11 +41,12 @@ moved to TV 14 (val 22.10, test 21.89; TV 12 21.95, 21.70; TV 16 on two seeds 0.
 fourierf-vm's to TV 12 by a hair (22.44, 22.35; TV 8 22.43, 22.43; TV 4 22.39, 22.30; TV 16 22.40, 22.37). On the
 rule's 8 / 24 TensoRF's TV 14 reads 22.40, 22.34 and its TV 12, its choice there (TV 10 and 16 lower on one seed),
 22.51, 22.37 (3 seeds), level with fourierf-vm's TV 12 (``OBJECT_COMPONENTS``). On P-MID's 200×200 images with that 300³
-grid (pmid300, 3 seeds) both wanted about twice the TV too (fourierf-vm TV 8 23.03 against TV 6 22.83; tensorf-vm, on 16
-/ 48, TV 12 22.51 against TV 10 22.30; on 8 / 24, its choice there, TV 12 22.72, with TV 10 and 14 level on one seed).
-So at 300³ both methods pick about twice their 192³ TV (measured on 200×200 only), and on 400×400 fourierf-vm about the
-same (flat from TV 4 to 16 there, 0.05 val), tensorf-vm the same as on 200×200 (TV 12 on 8 / 24; TV 14 on 16 / 48); the
-rule, a function of the iteration count, keeps TV 4 because the CPU sizing caps the grid at 192³."""
+grid (pmid300, 3 seeds) both wanted more TV too (fourierf-vm TV 8 23.03 against TV 6 22.83; tensorf-vm, on 16 / 48, TV
+12 22.51 against TV 10 22.30; on 8 / 24, its choice there, TV 10 22.87 against TV 12 22.72 and TV 14 22.67; TV 8, on
+two seeds, 0.83 below TV 10 on those). So at 300³ both methods pick about 1.7-2 times their 192³ TV (measured on
+200×200 only), and on 400×400 fourierf-vm about the same (flat from TV 4 to 16 there, 0.05 val), tensorf-vm a step
+more (TV 12 on 8 / 24; TV 14 on 16 / 48); the rule, a function of the iteration count, keeps TV 4 because the CPU sizing
+caps the grid at 192³."""
 
 OBJECT_COMPONENTS = (8, 24)
 """Object scenes, both methods: density and appearance components per plane/line group, half TensoRF's (16, 48). Chosen

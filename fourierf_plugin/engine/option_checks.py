@@ -81,6 +81,12 @@ RULES: tuple[Rule, ...] = (
     ),
     Rule(f"{_MODEL}.fourier.ramp_fraction", at_least(0.0), "a fraction of the run >= 0", "0.2"),
     Rule(f"{_MODEL}.fourier.plane_leakage", at_least(0.0), "a weight >= 0", "0"),
+    Rule(
+        f"{_MODEL}.fourier.density_axes",
+        lambda v: isinstance(v, (tuple, list)) and 0 < len(v) == len(set(v)) and all(x in (0, 1, 2) for x in v),
+        "one or more distinct world axes among 0 1 2 (x y z)",
+        "0 1",
+    ),
     Rule(f"{_MODEL}.step_ratio", positive, "a number of voxels > 0", "0.5"),
     Rule(f"{_MODEL}.distance_scale", positive, "a number > 0", "25"),
     Rule(f"{_MODEL}.occupancy_threshold", within(0.0, 1.0), "an alpha in [0, 1]", "1e-4"),
@@ -182,20 +188,43 @@ def check_final_cutoff(fourier: Any) -> None:
             )
 
 
-BAND_OPTIONS = (("init_in_band", True, "there is no band to start in"), ("boundary", "mirror", "nothing is filtered"))
-"""Options of the band itself: (field, the value that needs a band, why it would mean nothing without one)."""
+def _some_axes(axes: Any) -> bool:
+    """Whether ``density_axes`` leaves out an axis (the paper filters all three)."""
+    return sorted(axes) != [0, 1, 2]
+
+
+BAND_OPTIONS: tuple[tuple[str, Callable[[Any], bool], str], ...] = (
+    ("init_in_band", lambda v: v is True, "there is no band to start in"),
+    ("boundary", lambda v: v == "mirror", "nothing is filtered"),
+    ("density_axes", _some_axes, "nothing is filtered"),
+)
+"""Options of the band itself: (field, whether its value needs a band, why it would mean nothing without one)."""
 
 
 def check_band_options(fourier: Any) -> None:
     """An option of the band means nothing without a band: refuse it rather than ignore it."""
-    for name, value, why in BAND_OPTIONS:
-        if getattr(fourier, name) == value and not fourier.enabled:
+    for name, needs_band, why in BAND_OPTIONS:
+        value = getattr(fourier, name)
+        if needs_band(value) and not fourier.enabled:
             flag = flag_of(f"{_MODEL}.fourier.{name}")
             fail(
                 f"{flag} {_show(value)} needs the Fourier curriculum, which is off in this run (a tensorf-* preset or "
                 f"{flag_of(f'{_MODEL}.fourier.enabled')} False): {why}",
                 f"drop {flag}, or train a fourierf-* preset",
             )
+
+
+def check_density_axes(model: Any) -> None:
+    """Filtering the density along some axes only is an option of free factor grids: refuse it for ZeroRF's field,
+    whose generated factors are filtered along every axis, rather than ignore it."""
+    axes = model.fourier.density_axes
+    if _some_axes(axes) and model.field.zerorf.enabled:
+        flag = flag_of(f"{_MODEL}.fourier.density_axes")
+        fail(
+            f"{flag} {_show(axes)} applies to free factor grids; ZeroRF's generated factors are filtered along "
+            "every axis",
+            f"drop {flag}, or train fourierf-vm or fourierf-cp",
+        )
 
 
 def check_floaters_start(model: Any) -> None:
@@ -225,6 +254,7 @@ def check_training_options(config: Any) -> None:
     check_final_cutoff(config.pipeline.model.fourier)
     check_band_options(config.pipeline.model.fourier)
     check_floaters_start(config.pipeline.model)
+    check_density_axes(config.pipeline.model)
     iters = config.max_num_iterations
     if not (_integer(iters) and iters >= 1):
         fail(f"--max-num-iterations must be at least 1, got {iters}", "pass a positive number")

@@ -27,7 +27,10 @@ from fourierf_plugin.field_components.tensor_grids import TensorCP, TensorGrid, 
 from fourierf_plugin.fields.grid_ops import FilteredFactors, GridOps
 from fourierf_plugin.fields.prepared_field import FilteredGrids, PreparedField
 
-__all__ = ["FieldConfig", "FilteredGrids", "FourierTensoRFField"]
+__all__ = ["ALL_AXES", "FieldConfig", "FilteredGrids", "FourierTensoRFField"]
+
+ALL_AXES = (0, 1, 2)
+"""Every world axis (x, y, z): the paper filters each factor along all of them."""
 
 
 @dataclass
@@ -79,10 +82,12 @@ class FourierTensoRFField(PreparedField):
         plane_leakage: float = 0.0,
         app_planes_follow_density: bool = False,
         mirror_boundary: bool = False,
+        density_axes: Sequence[int] = ALL_AXES,
     ) -> None:
         super().__init__(aabb, ops, plane_leakage, mirror_boundary)
         self.config = config
         self.app_planes_follow_density = app_planes_follow_density
+        self.density_axes = tuple(density_axes)
         grid_cls = TensorVM if config.decomposition == "vm" else TensorCP
         init = config.init_scale if config.init_scale is not None else (0.1 if config.decomposition == "vm" else 0.2)
         self.density_grid: TensorGrid = grid_cls(reso, config.density_components, init, generator)
@@ -96,17 +101,24 @@ class FourierTensoRFField(PreparedField):
     # -- filtering --------------------------------------------------------------------------------------------
     def filter(self, f_density: float, f_color: float) -> FilteredGrids:
         """Every factor low-passed at the given cutoffs (identity at f = 1); appearance planes follow the density
-        cutoff where the official code's option says so."""
+        cutoff where the official code's option says so, and the density factors only along ``density_axes``."""
         f_app_planes = f_density if self.app_planes_follow_density else f_color
         rendering = not torch.is_grad_enabled()
 
-        def low_pass(grid: TensorGrid, f_planes: float, f_lines: float) -> FilteredFactors:
-            planes = [self.low_pass_planes(p, f_planes) for p in grid.planes]
-            return FilteredFactors(planes, [self.low_pass_lines(x, f_lines) for x in grid.lines], rendering)
+        def low_pass(grid: TensorGrid, f_planes: float, f_lines: float, axes: Sequence[int]) -> FilteredFactors:
+            planes = [
+                self.low_pass_plane_along(p, f_planes, spans, axes)
+                for p, spans in zip(grid.planes, grid.plane_axes, strict=True)
+            ]
+            lines = [
+                self.low_pass_lines(x, f_lines) if axis in axes else x
+                for x, axis in zip(grid.lines, grid.line_axes, strict=True)
+            ]
+            return FilteredFactors(planes, lines, rendering)
 
         return FilteredGrids(
-            low_pass(self.density_grid, f_density, f_density),
-            low_pass(self.appearance_grid, f_app_planes, f_color),
+            low_pass(self.density_grid, f_density, f_density, self.density_axes),
+            low_pass(self.appearance_grid, f_app_planes, f_color, ALL_AXES),
             (f_density, f_color),
         )
 

@@ -81,6 +81,19 @@ class PreparedField(nn.Module):
             return fourier.mirrored(self.ops.filter_planes, planes, f, 2, self.plane_leakage)
         return self.ops.filter_planes(planes, f, self.plane_leakage)
 
+    def low_pass_plane_along(self, plane: Tensor, f: float, spans: tuple[int, int], axes: Sequence[int]) -> Tensor:
+        """A [..., H, W] plane spanning world axes ``spans = (m0, m1)`` (W along m0, H along m1), low-passed along
+        those of them in ``axes``: the disc where both are, the line filter along the one where one is, unchanged
+        where neither is (a curriculum on some axes only, e.g. a forward-facing scene's image plane)."""
+        m0, m1 = spans
+        if m0 in axes and m1 in axes:
+            return self.low_pass_planes(plane, f)
+        if m0 in axes:
+            return self.low_pass_lines(plane, f)
+        if m1 in axes:
+            return self.low_pass_lines(plane.transpose(-1, -2), f).transpose(-1, -2)
+        return plane
+
     def low_pass_lines(self, lines: Tensor, f: float) -> Tensor:
         """[..., L] lines at cutoff ``f``, with the field's boundary (periodic or mirror)."""
         if self.mirror_boundary:

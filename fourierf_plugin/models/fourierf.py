@@ -80,6 +80,10 @@ class FourierConfig:
     filtered with its mirror image appended, so nothing wraps)."""
     app_planes_follow_density: bool = False
     """Official-code behaviour: appearance planes use the density cutoff instead of the colour cutoff."""
+    density_axes: tuple[int, ...] = (0, 1, 2)
+    """World axes (0 x, 1 y, 2 z) along which the density factors are low-passed; the paper filters all three. On a
+    forward-facing scene ``0 1`` keeps the curriculum on the image plane and leaves NDC depth (z) unfiltered, so the
+    coarse field is smooth across the view but can place a surface at a sharp depth from the first step."""
 
 
 def final_color_cutoff(fourier: FourierConfig) -> float:
@@ -172,6 +176,7 @@ class FourieRFModel(nn.Module):
             plane_leakage=config.fourier.plane_leakage,
             app_planes_follow_density=config.fourier.app_planes_follow_density,
             mirror_boundary=config.fourier.boundary == "mirror",
+            density_axes=config.fourier.density_axes,
         )
 
     # -- schedules (pure functions of the step) ---------------------------------------------------------------

@@ -12,6 +12,8 @@ within bf16 precision of float32; colour of large training batches in checkpoint
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 import torch
 import torch.nn.functional as F
@@ -41,10 +43,11 @@ def _field(
     decomposition: str = "vm",
     view_dependent: bool = False,
     dtype: torch.dtype = torch.float32,
-    mirror_boundary: bool = False,
+    **options: Any,
 ) -> FourierTensoRFField:
-    """The small field of the reference tests with leaky planes; the same parameters whatever ``ops`` it is given."""
-    field_kw = {"ops": ops, "plane_leakage": 1e-6, "mirror_boundary": mirror_boundary}
+    """The small field of the reference tests with leaky planes; the same parameters whatever ``ops`` it is given.
+    ``options`` are the field's own (``mirror_boundary``, ``density_axes``)."""
+    field_kw = {"ops": ops, "plane_leakage": 1e-6, **options}
     return small_field(decomposition, view_dependent, field_kw, dtype, init_scale=0.5)
 
 
@@ -106,14 +109,17 @@ def test_accelerated_ops_equal_the_reference(
 
 
 @pytest.mark.parametrize("decomposition", ["vm", "cp"])
-def test_accelerated_ops_equal_the_reference_with_mirror_boundaries(decomposition: str) -> None:
-    # The fast filters see the mirror-extended factors (their backward is the same filter, still exact).
+@pytest.mark.parametrize(
+    "options", [{"mirror_boundary": True}, {"density_axes": (0, 1)}, {"mirror_boundary": True, "density_axes": (0, 1)}]
+)
+def test_accelerated_ops_equal_the_reference_with_field_options(decomposition: str, options: dict) -> None:
+    # The fast filters see the mirror-extended factors, or planes filtered along one axis (transposed where that axis
+    # is the height); their backward is the same filter, still exact.
     xyz = _points(300, torch.float64)
-    reference = _outputs(_field(GridOps(), decomposition, dtype=torch.float64, mirror_boundary=True), xyz, None, True)
-    periodic = _outputs(_field(GridOps(), decomposition, dtype=torch.float64), xyz, None, True)
-    accelerated = _field(_accelerated(), decomposition, dtype=torch.float64, mirror_boundary=True)
-    ours = _outputs(accelerated, xyz, None, True)
-    assert not torch.allclose(reference[0], periodic[0])
+    reference = _outputs(_field(GridOps(), decomposition, dtype=torch.float64, **options), xyz, None, True)
+    plain = _outputs(_field(GridOps(), decomposition, dtype=torch.float64), xyz, None, True)
+    ours = _outputs(_field(_accelerated(), decomposition, dtype=torch.float64, **options), xyz, None, True)
+    assert not torch.allclose(reference[0], plain[0])
     torch.testing.assert_close(ours[0], reference[0], atol=1e-11, rtol=1e-11)
     torch.testing.assert_close(ours[1], reference[1], atol=1e-11, rtol=1e-11)
     for name, grad in reference[2].items():

@@ -216,6 +216,47 @@ def test_mirror_boundary_filters_each_factor_with_its_mirror_image() -> None:
     assert all(a is b for a, b in zip(g.density.lines, field.density_grid.lines, strict=True))
 
 
+@pytest.mark.parametrize("decomposition", ["vm", "cp"])
+def test_density_axes_leave_the_other_axes_unfiltered(decomposition: str) -> None:
+    """Density filtered along x and y only (a forward-facing scene's image plane): factors along z are the raw ones,
+    planes across z are low-passed along their in-plane axis alone, and every appearance factor as before."""
+    field = small_field(decomposition, field_kw={"density_axes": (0, 1)})
+    plain = small_field(decomposition)
+    g, reference = field.filter(0.0, 0.0), plain.filter(0.0, 0.0)
+    grid = field.density_grid
+    for line, raw, axis in zip(g.density.lines, grid.lines, grid.line_axes, strict=True):
+        if axis == 2:
+            assert line is raw
+        else:  # f = 0: the line mean
+            torch.testing.assert_close(line, raw.mean(dim=-1, keepdim=True).expand_as(raw), atol=1e-6, rtol=0)
+    for p, raw, spans in zip(g.density.planes, grid.planes, grid.plane_axes, strict=True):
+        if spans == (0, 1):  # both axes filtered: the disc, at f = 0 the plane mean
+            torch.testing.assert_close(p, raw.mean(dim=(-2, -1), keepdim=True).expand_as(raw), atol=1e-6, rtol=0)
+        else:  # (x or y, z): the mean along the in-plane axis (W), every z row on its own
+            assert spans[1] == 2
+            torch.testing.assert_close(p, raw.mean(dim=-1, keepdim=True).expand_as(raw), atol=1e-6, rtol=0)
+    appearance = (*g.appearance.planes, *g.appearance.lines)
+    for a, b in zip(appearance, (*reference.appearance.planes, *reference.appearance.lines), strict=True):
+        torch.testing.assert_close(a, b)
+    z_only = small_field(decomposition, field_kw={"density_axes": (2,)})
+    g = z_only.filter(0.0, 0.0)
+    for p, raw, spans in zip(g.density.planes, z_only.density_grid.planes, z_only.density_grid.plane_axes, strict=True):
+        if spans == (0, 1):  # no z in the plane: unfiltered
+            assert p is raw
+        else:  # the mean along z (H), every column on its own
+            torch.testing.assert_close(p, raw.mean(dim=-2, keepdim=True).expand_as(raw), atol=1e-6, rtol=0)
+    opened = field.filter(1.0, 1.0)  # the band open: the raw factors, as with every axis
+    assert all(a is b for a, b in zip(opened.density.planes, grid.planes, strict=True))
+
+
+def test_density_axes_with_mirror_boundary_mirror_along_the_filtered_axis_only() -> None:
+    field = small_field(field_kw={"density_axes": (0, 1), "mirror_boundary": True})
+    g = field.filter(0.4, 1.0)
+    xz_plane = field.density_grid.planes[1]  # W along x (filtered), H along z (not)
+    torch.testing.assert_close(g.density.planes[1], fourier.mirrored(fourier.filter_lines, xz_plane, 0.4, 1))
+    assert g.density.lines[0] is field.density_grid.lines[0]  # the z line
+
+
 def test_filtered_grids_carry_gradients_to_raw_parameters() -> None:
     field = small_field()
     field.prepare(0.5, 0.5)

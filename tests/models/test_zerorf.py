@@ -249,6 +249,16 @@ def test_bad_generator_options_are_user_errors_naming_the_flag(changes: dict, fl
     assert flag in info.value.problem and "ZeroRF's value" in (info.value.fix or "")
 
 
+def test_density_axes_are_refused_for_generated_factors() -> None:
+    config = copy.deepcopy(all_methods["zerorf-vm"])
+    config.pipeline.model.fourier.enabled = True  # the band on, so only the field can refuse
+    check_training_options(config)
+    config.pipeline.model.fourier.density_axes = (0, 1)
+    with pytest.raises(UserError) as info:
+        check_training_options(config)
+    assert "--pipeline.model.fourier.density-axes 0 1" in info.value.problem and "ZeroRF" in info.value.problem
+
+
 def test_generator_options_of_a_method_that_does_not_use_them_are_not_checked() -> None:
     config = copy.deepcopy(all_methods["fourierf-vm"])
     config.pipeline.model.field.zerorf = ZeroRFConfig(enabled=False, plane_channels=(100,))

@@ -312,6 +312,17 @@ CASES: dict[str, Case] = {
         train_with(f"{MODEL}.fourier.boundary", "mirror", f"{MODEL}.fourier.enabled", "False"),
         ("boundary mirror", "curriculum", "off", "nothing is filtered", "drop"),
     ),
+    "train: density axes of a band that is off": Case(
+        "train",
+        train_with(f"{MODEL}.fourier.density-axes", "0", "1", f"{MODEL}.fourier.enabled", "False"),
+        ("density-axes 0 1", "curriculum", "off", "nothing is filtered", "drop"),
+    ),
+    "train: density axes beyond z": Case(
+        "train", train_with(f"{MODEL}.fourier.density-axes", "0", "3"), ("density-axes 0 3", "0 1 2")
+    ),
+    "train: density axes twice": Case(
+        "train", train_with(f"{MODEL}.fourier.density-axes", "1", "1"), ("density-axes 1 1", "distinct")
+    ),
     "train: final cutoff 0": Case("train", train_with(f"{MODEL}.fourier.f-final", "0"), ("f-final 0", "(0, 1]")),
     "train: negative ramp": Case("train", train_with(f"{MODEL}.fourier.ramp-fraction", "-1"), ("ramp-fraction -1",)),
     "train: negative plane leakage": Case(

@@ -10,7 +10,8 @@ the first occupancy update on (``OBJECT_RANDOM_BACKGROUND_FROM``).
 A forward-facing scene wants a 4x grid learning rate (TensoRF's 0.02 is tuned for 25k iterations: fern val 18.91 ->
 19.33 at 800, 18.27 -> 19.97 at 3000; tensorf-vm likewise) and a constant TV weight of 4 on the planes
 (``REAL_TV_WEIGHT``), both methods alike, and FourieRF, in a longer run, its band open by step 800
-(``REAL_RAMP_ITERATIONS``); a longer forward-facing run also revives a dark density field at once
+(``REAL_RAMP_ITERATIONS``), in a run no longer than that its density filtered on the image plane only
+(``REAL_DENSITY_AXES``); a longer forward-facing run also revives a dark density field at once
 (``REAL_REVIVE_AT_ONCE_ABOVE``); and a forward-facing run's one occupancy update waits for step 200, so it cannot
 prune a field that has not lit yet (``REAL_OCCUPANCY_STEP``). At the paper's budget and above the paper's values
 stand, as the paper measured them.
@@ -126,11 +127,27 @@ REAL_RAMP_ITERATIONS = 800
 """Forward-facing scenes, FourieRF: the band opens over this many iterations, or over the whole run if it is shorter.
 The real-scene preset opens it over the whole run, which at 800 iterations won on val; at 3000 the band was open only
 at the last step and opening it by step 800 won (fern val 20.04 -> 21.22 at 64³ -> 128³, 19.97 -> 21.06 at 192³).
-At 1500 (64³ -> 128³, 3 seeds, with the revival below) it held by less than a seed's spread: 20.25 against 20.17 for
+At 1500 (64³ -> 128³, 3 seeds, with the revival below) it held by less than a seed's spread: 20.24 against 20.17 for
 the whole run; at 3000 opening by step 1500 read 21.41 against the rule's 21.19 on seed 20211202 but 20.65 and 20.70
 on seeds 1 and 2, where the rule read 20.71 and 21.02 (means 20.92 against 20.97).
 Objects keep the paper's 20 % at any budget: with the object rule's TV it beat half of an 800-iteration run (lego val
 22.71 against 22.52 at TV 2), and at 3000 it beat half the run at TV 1 (21.97 against 21.63)."""
+
+
+REAL_DENSITY_AXES = (0, 1)
+"""Forward-facing scenes, FourieRF, runs up to ``REAL_DENSITY_AXES_UP_TO`` iterations: the density curriculum on the
+image plane only (x and y); NDC depth (z) is unfiltered from the first step (``--pipeline.model.fourier.density-axes``;
+the paper filters every axis), so the coarse field is smooth across the view but can set a surface's depth sharply.
+Fern val (P-CPU's 64³ -> 128³, 1024 rays, 3 seeds; every axis -> x and y): 800 iterations 20.07 -> 20.28 (per seed
+20.08 -> 20.44, 20.27 -> 20.23, 19.85 -> 20.17; test 19.52 -> 19.65). Where the band opens before the run ends it
+lost: 1500 iterations (band open by step 800) 20.24 -> 20.19 (+0.27, -0.57, +0.11), 3000 20.97 -> 20.30 (every seed,
+-0.51 to -0.79). With Floaters-No-More as well it fell to 17.78 (800, seed 20211202; FNM on every axis 19.85). A
+prototype that held z's band narrower than x's and y's lost at 800 (seed 20211202: half the cutoff 19.64, the cutoff
+squared 19.89, against 20.08)."""
+
+REAL_DENSITY_AXES_UP_TO = REAL_RAMP_ITERATIONS
+"""The longest forward-facing run that gets ``REAL_DENSITY_AXES``: the runs whose band opens over the whole run (the
+one budget where it won; at 1500 and 3000 it lost)."""
 
 
 REAL_REVIVE_AT_ONCE_ABOVE = REAL_RAMP_ITERATIONS
@@ -182,6 +199,12 @@ def ramp_fraction(scene_preset: str, iterations: int) -> float | None:
     return None
 
 
+def density_axes(scene_preset: str, iterations: int) -> tuple[int, ...] | None:
+    """The rule's density-filtered axes for a FourieRF run (None: the preset's, every axis): a short forward-facing run
+    filters the density on the image plane only."""
+    return REAL_DENSITY_AXES if scene_preset == "real" and iterations <= REAL_DENSITY_AXES_UP_TO else None
+
+
 def object_components(scene_preset: str, iterations: int) -> dict[str, Any]:
     """The rule's component counts (none: the preset's): half TensoRF's for an object run of 800 iterations or more."""
     if scene_preset != "synthetic" or iterations < OBJECT_COMPONENTS_FROM:
@@ -212,6 +235,7 @@ def short_run_settings(method: str, scene_preset: str, iterations: int, backgrou
     fourierf = method == "fourierf-vm"
     by_step = {
         "pipeline.model.fourier.ramp_fraction": ramp_fraction(scene_preset, iterations) if fourierf else None,
+        "pipeline.model.fourier.density_axes": density_axes(scene_preset, iterations) if fourierf else None,
         "pipeline.model.field.revive_patience": revive_patience(scene_preset, iterations),
         "pipeline.model.occupancy_update_fractions": occupancy_update_fractions(scene_preset, iterations),
     }

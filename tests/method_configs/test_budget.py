@@ -15,6 +15,8 @@ from fourierf_plugin.method_configs.budget import (
     OBJECT_RANDOM_BACKGROUND_FROM,
     OBJECT_TV_WEIGHT,
     PAPER_ITERATIONS,
+    REAL_DENSITY_AXES,
+    REAL_DENSITY_AXES_UP_TO,
     REAL_OCCUPANCY_FROM,
     REAL_OCCUPANCY_STEP,
     REAL_RAMP_ITERATIONS,
@@ -62,9 +64,10 @@ def test_rule_is_a_function_of_the_iteration_count() -> None:
     real = {"optimizer.lr_grids": 0.08, "pipeline.model.tv_decay_ratio": 1.0}
     real |= {"pipeline.model.tv_weight_density": REAL_TV_WEIGHT, "pipeline.model.tv_weight_appearance": REAL_TV_WEIGHT}
     real_800 = real | {"pipeline.model.occupancy_update_fractions": (0.25,)}
-    assert short_run_settings("fourierf-vm", "real", 800) == real_800
+    axes = {"pipeline.model.fourier.density_axes": REAL_DENSITY_AXES}
+    assert short_run_settings("fourierf-vm", "real", 800) == real_800 | axes, "the curriculum on the image plane"
     assert short_run_settings("tensorf-vm", "real", 800) == real_800, "forward-facing: the same rule, masks off"
-    assert short_run_settings("fourierf-vm", "real", REAL_OCCUPANCY_FROM - 1) == real, "shorter: the preset's 10 %"
+    assert short_run_settings("fourierf-vm", "real", REAL_OCCUPANCY_FROM - 1) == real | axes, "the preset's 10 %"
     ramp = "pipeline.model.fourier.ramp_fraction"
     assert short_run_settings("fourierf-vm", "real", 3000)[ramp] == 0.2667, "the band opens by step 800"
     assert round(0.2667 * 3000) == REAL_RAMP_ITERATIONS
@@ -191,6 +194,27 @@ def test_a_longer_forward_facing_run_opens_the_band_by_step_800(llff_scene: Path
     assert any("kept your pipeline.model.fourier.ramp_fraction" in n for n in notes)
     short, _ = finished("fourierf-vm", llff_scene, "--max-num-iterations", str(REAL_RAMP_ITERATIONS))
     assert short.pipeline.model.fourier.ramp_fraction == 1.0, "a short run keeps the whole-run ramp that won at 800"
+
+
+def test_a_short_forward_facing_run_filters_the_density_on_the_image_plane_only(llff_scene: Path) -> None:
+    axes = "pipeline.model.fourier.density_axes"
+    assert REAL_DENSITY_AXES == (0, 1), "x and y: NDC depth unfiltered"
+    for iterations in (100, 800, REAL_DENSITY_AXES_UP_TO):
+        assert short_run_settings("fourierf-vm", "real", iterations)[axes] == REAL_DENSITY_AXES, iterations
+    assert axes not in short_run_settings("fourierf-vm", "real", REAL_DENSITY_AXES_UP_TO + 1), "longer runs: every axis"
+    assert axes not in short_run_settings("tensorf-vm", "real", 800), "no band to filter"
+    assert axes not in short_run_settings("fourierf-vm", "synthetic", 800), "objects: every axis"
+    config, notes = finished("fourierf-vm", llff_scene, "--max-num-iterations", "800")
+    assert config.pipeline.model.fourier.density_axes == REAL_DENSITY_AXES
+    assert any(n.startswith("budget rule") and "density_axes=(0, 1)" in n for n in notes)
+    mine, _ = finished(
+        "fourierf-vm", llff_scene, "--max-num-iterations", "800", "--pipeline.model.fourier.density-axes", "0", "1", "2"
+    )
+    assert mine.pipeline.model.fourier.density_axes == (0, 1, 2), "a flag wins, even the preset's own value"
+    paper, _ = finished("fourierf-vm-paper", llff_scene, "--max-num-iterations", "800")
+    assert paper.pipeline.model.fourier.density_axes == (0, 1, 2)
+    tensorf, _ = finished("tensorf-vm", llff_scene, "--max-num-iterations", "800")
+    assert tensorf.pipeline.model.fourier.density_axes == (0, 1, 2)
 
 
 def test_a_longer_forward_facing_run_revives_a_dark_density_field_at_once(llff_scene: Path) -> None:

@@ -586,6 +586,15 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # 19.64, the cutoff squared 19.89, against 20.08 on seed 20211202.)
         "lr0.08-tvconst-tv4-alphamask0.25-zfree": [*FERN_TV4, *OCCUPANCY_AT_STEP_200, *DENSITY_XY],
         "lr0.08-tvconst-tv4-fnm-alphamask0.25-zfree": [*FERN_TV4, *FNM, *OCCUPANCY_AT_STEP_200, *DENSITY_XY],
+        # ... and on it the levers its new field may want otherwise: mirror boundaries (x and y only now wrap), and
+        # the TV weight chosen without it (4) a step either way.
+        "lr0.08-tvconst-tv4-alphamask0.25-zfree-mirror": [*FERN_TV4, *OCCUPANCY_AT_STEP_200, *DENSITY_XY, *MIRROR],
+        **{
+            f"lr0.08-tvconst-tv{tv}-alphamask0.25-zfree": [
+                "--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(tv), *OCCUPANCY_AT_STEP_200, *DENSITY_XY,
+            ]
+            for tv in (2, 6)
+        },
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband", "mirror", "zfree")

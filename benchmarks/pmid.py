@@ -438,6 +438,8 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # TensoRF's L1 before it): the field lights, the L1 clears the fog, the box shrinks.
         "wd0-nodecay-lr0.04-tv4-bgwarm": [*LEGO_TV4, *RANDOM_AFTER_UPDATE],
         "wd0-nodecay-lr0.04-tv4-comp8-bgwarm": [*LEGO_TV4, *components(8, 24), *RANDOM_AFTER_UPDATE],
+        # Session 45: the density curriculum on x and y only (fern's image plane; on lego z is up, not depth).
+        "wd0-nodecay-lr0.04-tv4-comp8-bgwarm-zfree": [*LEGO_TV4, *components(8, 24), *RANDOM_AFTER_UPDATE, *DENSITY_XY],
         "wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm": [
             *LEGO_TV4, *components(8, 24), *first_band("0.05"), *RANDOM_AFTER_UPDATE],
         "wd0-nodecay-lr0.04-tv6-bgwarm": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_AFTER_UPDATE],
@@ -587,14 +589,19 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-tvconst-tv4-alphamask0.25-zfree": [*FERN_TV4, *OCCUPANCY_AT_STEP_200, *DENSITY_XY],
         "lr0.08-tvconst-tv4-fnm-alphamask0.25-zfree": [*FERN_TV4, *FNM, *OCCUPANCY_AT_STEP_200, *DENSITY_XY],
         # ... and on it the levers its new field may want otherwise: mirror boundaries (x and y only now wrap), and
-        # the TV weight chosen without it (4) a step either way.
+        # the TV weight chosen without it (4) a step or two either way.
         "lr0.08-tvconst-tv4-alphamask0.25-zfree-mirror": [*FERN_TV4, *OCCUPANCY_AT_STEP_200, *DENSITY_XY, *MIRROR],
         **{
             f"lr0.08-tvconst-tv{tv}-alphamask0.25-zfree": [
                 "--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(tv), *OCCUPANCY_AT_STEP_200, *DENSITY_XY,
             ]
-            for tv in (2, 6)
+            for tv in (2, 6, 8)
         },
+        # ... and, since fourierf-vm's best val mean moved to TV 6 there, tensorf-vm's val choice (TV 4 with FNM) at
+        # TV 6 as well, so neither method's TV search stops a step short of the other's.
+        "lr0.08-tvconst-tv6-fnm-alphamask0.25": [
+            "--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(6), *FNM, *OCCUPANCY_AT_STEP_200,
+        ],
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband", "mirror", "zfree")

@@ -136,14 +136,17 @@ Objects keep the paper's 20 % at any budget: with the object rule's TV it beat h
 
 REAL_DENSITY_AXES = (0, 1)
 """Forward-facing scenes, FourieRF, runs up to ``REAL_DENSITY_AXES_UP_TO`` iterations: the density curriculum on the
-image plane only (x and y); NDC depth (z) is unfiltered from the first step (``--pipeline.model.fourier.density-axes``;
-the paper filters every axis), so the coarse field is smooth across the view but can set a surface's depth sharply.
-Fern val (P-CPU's 64³ -> 128³, 1024 rays, 3 seeds; every axis -> x and y): 800 iterations 20.07 -> 20.28 (per seed
-20.08 -> 20.44, 20.27 -> 20.23, 19.85 -> 20.17; test 19.52 -> 19.65). Where the band opens before the run ends it
-lost: 1500 iterations (band open by step 800) 20.24 -> 20.19 (+0.27, -0.57, +0.11), 3000 20.97 -> 20.30 (every seed,
--0.51 to -0.79). With Floaters-No-More as well it fell to 17.78 (800, seed 20211202; FNM on every axis 19.85). A
-prototype that held z's band narrower than x's and y's lost at 800 (seed 20211202: half the cutoff 19.64, the cutoff
-squared 19.89, against 20.08)."""
+image plane only (x and y); NDC depth (z) is unfiltered from the first step
+(``--pipeline.model.fourier.density-axes``; the paper filters every axis), so the coarse field is smooth across the
+view but can set a surface's depth sharply. Fern val (P-CPU's 64³ -> 128³, 1024 rays, 3 seeds; every axis -> x and
+y): 800 iterations 20.07 -> 20.28 (per seed 20.08 -> 20.44, 20.27 -> 20.23, 19.85 -> 20.17; test 19.52 -> 19.65).
+Where the band opens before the run ends it lost: 1500 iterations (band open by step 800) 20.24 -> 20.19 (+0.27,
+-0.57, +0.11), 3000 20.97 -> 20.30 (every seed, -0.51 to -0.79). With Floaters-No-More as well it fell to 17.78 (800,
+seed 20211202; FNM on every axis 19.85). A prototype that held z's band narrower than x's and y's lost at 800 (seed
+20211202: half the cutoff 19.64, the cutoff squared 19.89, against 20.08). Objects keep every axis (lego P-CPU, x and
+y, seed 20211202: 23.07 -> 22.86). On top of it fourierf-vm's best val mean is at TV 6 (20.42, 3 seeds; TV 2 20.02,
+TV 8 19.96 on seed 20211202), but ``REAL_TV_WEIGHT`` stays 4: both methods share it, plain TensoRF at TV 6 was not
+run, and the lead rests on two seeds of three (seed 1 0.37 lower)."""
 
 REAL_DENSITY_AXES_UP_TO = REAL_RAMP_ITERATIONS
 """The longest forward-facing run that gets ``REAL_DENSITY_AXES``: the runs whose band opens over the whole run (the

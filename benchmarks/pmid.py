@@ -602,6 +602,10 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-tvconst-tv6-fnm-alphamask0.25": [
             "--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(6), *FNM, *OCCUPANCY_AT_STEP_200,
         ],
+        # ... and plain tensorf-vm, the rule's other method, at the rule's TV 4 and at TV 6 (its share of a TV rule).
+        "lr0.08-tvconst-tv6-alphamask0.25": [
+            "--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(6), *OCCUPANCY_AT_STEP_200,
+        ],
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband", "mirror", "zfree")

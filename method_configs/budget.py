@@ -145,8 +145,9 @@ Where the band opens before the run ends it lost: 1500 iterations (band open by 
 seed 20211202; FNM on every axis 19.85). A prototype that held z's band narrower than x's and y's lost at 800 (seed
 20211202: half the cutoff 19.64, the cutoff squared 19.89, against 20.08). Objects keep every axis (lego P-CPU, x and
 y, seed 20211202: 23.07 -> 22.86). On top of it fourierf-vm's best val mean is at TV 6 (20.42, 3 seeds; TV 2 20.02,
-TV 8 19.96 on seed 20211202), but ``REAL_TV_WEIGHT`` stays 4: both methods share it, plain TensoRF at TV 6 ran on one
-seed only (19.84 against 19.51 at TV 4, seed 20211202), and the lead rests on two seeds of three (seed 1 0.37 lower)."""
+TV 8 19.96 on seed 20211202), and plain TensoRF's at TV 6 too (19.16 -> 19.48, 3 seeds, every seed higher);
+``REAL_TV_WEIGHT`` stays 4 until a session changes it for short forward-facing runs with its tests (fourierf-vm's
+lead rests on two seeds of three)."""
 
 REAL_DENSITY_AXES_UP_TO = REAL_RAMP_ITERATIONS
 """The longest forward-facing run that gets ``REAL_DENSITY_AXES``: the runs whose band opens over the whole run (the

@@ -275,7 +275,14 @@ def fern_rule(ramp: str, tv: float = 4.0, lr: str = "0.08") -> list[str]:
 FERN_PMID_RULE = fern_rule("0.2667")
 """Session 19's forward-facing rule at 3000 iterations (the band open by step 800, constant TV 4), which P-MID's fern
 settings of sessions 19, 23 and 24 vary."""
-FERN_TV4 = ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(4.0)]
+
+
+def fern_tv(tv: float) -> list[str]:
+    """The forward-facing rule at 800 iterations with a constant TV weight ``tv`` (grid lr 0.08; the preset's band)."""
+    return ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(tv)]
+
+
+FERN_TV4 = fern_tv(4.0)
 """The forward-facing rule at 800 iterations (grid lr 0.08, constant TV 4; the preset's band), which P-CPU's fern
 settings of sessions 16-26 vary."""
 
@@ -592,20 +599,14 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # the TV weight chosen without it (4) a step or two either way.
         "lr0.08-tvconst-tv4-alphamask0.25-zfree-mirror": [*FERN_TV4, *OCCUPANCY_AT_STEP_200, *DENSITY_XY, *MIRROR],
         **{
-            f"lr0.08-tvconst-tv{tv}-alphamask0.25-zfree": [
-                "--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(tv), *OCCUPANCY_AT_STEP_200, *DENSITY_XY,
-            ]
+            f"lr0.08-tvconst-tv{tv}-alphamask0.25-zfree": [*fern_tv(tv), *OCCUPANCY_AT_STEP_200, *DENSITY_XY]
             for tv in (2, 6, 8)
         },
         # ... and, since fourierf-vm's best val mean moved to TV 6 there, tensorf-vm's val choice (TV 4 with FNM) at
         # TV 6 as well, so neither method's TV search stops a step short of the other's.
-        "lr0.08-tvconst-tv6-fnm-alphamask0.25": [
-            "--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(6), *FNM, *OCCUPANCY_AT_STEP_200,
-        ],
+        "lr0.08-tvconst-tv6-fnm-alphamask0.25": [*fern_tv(6), *FNM, *OCCUPANCY_AT_STEP_200],
         # ... and plain tensorf-vm, the rule's other method, at the rule's TV 4 and at TV 6 (its share of a TV rule).
-        "lr0.08-tvconst-tv6-alphamask0.25": [
-            "--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(6), *OCCUPANCY_AT_STEP_200,
-        ],
+        "lr0.08-tvconst-tv6-alphamask0.25": [*fern_tv(6), *OCCUPANCY_AT_STEP_200],
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband", "mirror", "zfree")

@@ -15,6 +15,7 @@ from typing import Any
 
 from fourierf_plugin.field_components.generator import invalid_options
 from fourierf_plugin.field_components.schedules import steps_from_fractions
+from fourierf_plugin.fields.fourier_tensorf_field import ALL_AXES
 from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.utils.memory import available_memory, check_fits
 
@@ -83,7 +84,7 @@ RULES: tuple[Rule, ...] = (
     Rule(f"{_MODEL}.fourier.plane_leakage", at_least(0.0), "a weight >= 0", "0"),
     Rule(
         f"{_MODEL}.fourier.density_axes",
-        lambda v: isinstance(v, (tuple, list)) and 0 < len(v) == len(set(v)) and all(x in (0, 1, 2) for x in v),
+        lambda v: isinstance(v, (tuple, list)) and 0 < len(v) == len(set(v)) and all(x in ALL_AXES for x in v),
         "one or more distinct world axes among 0 1 2 (x y z)",
         "0 1",
     ),
@@ -190,7 +191,7 @@ def check_final_cutoff(fourier: Any) -> None:
 
 def _some_axes(axes: Any) -> bool:
     """Whether ``density_axes`` leaves out an axis (the paper filters all three)."""
-    return sorted(axes) != [0, 1, 2]
+    return sorted(axes) != list(ALL_AXES)
 
 
 BAND_OPTIONS: tuple[tuple[str, Callable[[Any], bool], str], ...] = (

@@ -20,7 +20,7 @@ from fourierf_plugin.accel.config import uses_gpu_paths
 from fourierf_plugin.configs.base import InstantiateConfig
 from fourierf_plugin.data.scene_effects import SceneEffects
 from fourierf_plugin.field_components import schedules
-from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig, FourierTensoRFField
+from fourierf_plugin.fields.fourier_tensorf_field import ALL_AXES, FieldConfig, FourierTensoRFField
 from fourierf_plugin.fields.prepared_field import PreparedField
 from fourierf_plugin.fields.zerorf_field import ZeroRFField
 from fourierf_plugin.model_components import losses
@@ -80,7 +80,7 @@ class FourierConfig:
     filtered with its mirror image appended, so nothing wraps)."""
     app_planes_follow_density: bool = False
     """Official-code behaviour: appearance planes use the density cutoff instead of the colour cutoff."""
-    density_axes: tuple[int, ...] = (0, 1, 2)
+    density_axes: tuple[int, ...] = ALL_AXES
     """World axes (0 x, 1 y, 2 z) along which the density factors are low-passed; the paper filters all three. On a
     forward-facing scene ``0 1`` keeps the curriculum on the image plane and leaves NDC depth (z) unfiltered, so the
     coarse field is smooth across the view but can place a surface at a sharp depth from the first step."""

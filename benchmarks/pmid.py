@@ -447,6 +447,10 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "wd0-nodecay-lr0.04-tv4-comp8-bgwarm": [*LEGO_TV4, *components(8, 24), *RANDOM_AFTER_UPDATE],
         # Session 45: the density curriculum on x and y only (fern's image plane; on lego z is up, not depth).
         "wd0-nodecay-lr0.04-tv4-comp8-bgwarm-zfree": [*LEGO_TV4, *components(8, 24), *RANDOM_AFTER_UPDATE, *DENSITY_XY],
+        # Session 46: the curriculum on the geometry only, the colour band open from the first step (f0 colour 1).
+        "wd0-nodecay-lr0.04-tv4-comp8-bgwarm-f0c1": [
+            *LEGO_TV4, *components(8, 24), *RANDOM_AFTER_UPDATE, F0_COLOR, "1.0",
+        ],
         "wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm": [
             *LEGO_TV4, *components(8, 24), *first_band("0.05"), *RANDOM_AFTER_UPDATE],
         "wd0-nodecay-lr0.04-tv6-bgwarm": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_AFTER_UPDATE],
@@ -607,6 +611,27 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-tvconst-tv6-fnm-alphamask0.25": [*fern_tv(6), *FNM, *OCCUPANCY_AT_STEP_200],
         # ... and plain tensorf-vm, the rule's other method, at the rule's TV 4 and at TV 6 (its share of a TV rule).
         "lr0.08-tvconst-tv6-alphamask0.25": [*fern_tv(6), *OCCUPANCY_AT_STEP_200],
+        # Session 46: on the image-plane curriculum at TV 6, the band's start and speed searched again (the preset's
+        # f0 0.01 and whole-run ramp were chosen with every axis filtered), the grid lr and depth smoothness, and the
+        # density band open from the start (appearance curriculum only). (Throwaway prototypes, not kept, filtered the
+        # appearance on x and y only, 18.72, or held its z band at the cutoff squared, 20.35, or cubed, 20.07, against
+        # 20.51.)
+        **{
+            f"lr0.08-tvconst-tv6-alphamask0.25-zfree-f0d{f0}": [
+                *fern_tv(6), *OCCUPANCY_AT_STEP_200, *DENSITY_XY, F0_DENSITY, f0,
+            ]
+            for f0 in ("0.05", "0.1")
+        },
+        "lr0.08-tvconst-tv6-alphamask0.25-zfree-ramp0.75": [
+            *fern_tv(6), *OCCUPANCY_AT_STEP_200, *DENSITY_XY, RAMP, "0.75",
+        ],
+        "lr0.08-tvconst-tv6-alphamask0.25-f0d1": [*fern_tv(6), *OCCUPANCY_AT_STEP_200, F0_DENSITY, "1.0"],
+        "lr0.12-tvconst-tv6-alphamask0.25-zfree": [
+            "--optimizer.lr-grids", "0.12", *TV_CONST, *tv_weights(6.0), *OCCUPANCY_AT_STEP_200, *DENSITY_XY,
+        ],
+        "lr0.08-tvconst-tv6-alphamask0.25-zfree-ds1": [
+            *fern_tv(6), *OCCUPANCY_AT_STEP_200, *DENSITY_XY, *depth_smoothness(1.0),
+        ],
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband", "mirror", "zfree")

@@ -8,13 +8,13 @@ rule's: FourieRF 21.30 -> 22.57 at 800 iterations, 20.34 -> 22.48 at 3000; Tenso
 and with half TensoRF's components (``OBJECT_COMPONENTS``); where its images carry alpha, on a random background from
 the first occupancy update on (``OBJECT_RANDOM_BACKGROUND_FROM``).
 A forward-facing scene wants a 4x grid learning rate (TensoRF's 0.02 is tuned for 25k iterations: fern val 18.91 ->
-19.33 at 800, 18.27 -> 19.97 at 3000; tensorf-vm likewise) and a constant TV weight of 4 on the planes
-(``REAL_TV_WEIGHT``), both methods alike, and FourieRF, in a longer run, its band open by step 800
-(``REAL_RAMP_ITERATIONS``), in a run no longer than that its density filtered on the image plane only
-(``REAL_DENSITY_AXES``); a longer forward-facing run also revives a dark density field at once
-(``REAL_REVIVE_AT_ONCE_ABOVE``); and a forward-facing run's one occupancy update waits for step 200, so it cannot
-prune a field that has not lit yet (``REAL_OCCUPANCY_STEP``). At the paper's budget and above the paper's values
-stand, as the paper measured them.
+19.33 at 800, 18.27 -> 19.97 at 3000; tensorf-vm likewise) and a constant TV weight on the planes, 6 in a run of up to
+800 iterations (``REAL_SHORT_TV_WEIGHT``) and 4 in a longer one (``REAL_TV_WEIGHT``), both methods alike, and FourieRF,
+in a longer run, its band open by step 800 (``REAL_RAMP_ITERATIONS``), in a run no longer than that its density filtered
+on the image plane only (``REAL_DENSITY_AXES``); a longer forward-facing run also revives a dark density field at once
+(``REAL_REVIVE_AT_ONCE_ABOVE``); and a forward-facing run's one occupancy update waits for step 200, so it cannot prune
+a field that has not lit yet (``REAL_OCCUPANCY_STEP``). At the paper's budget and above the paper's values stand, as the
+paper measured them.
 ``--budget-rule False`` (or the ``fourierf-vm-paper`` preset) keeps the preset's values at any budget.
 """
 
@@ -88,15 +88,15 @@ with smooth density, which the random background clears, and won at 800 iteratio
 BACKGROUND_PATH = "pipeline.effects.background"
 
 REAL_TV_WEIGHT = 4.0
-"""Forward-facing scenes, both methods: a constant TV weight on the density and appearance planes (the paper's 1.0,
-TensoRF's decaying to 0.1). Fern val at grid lr 0.08, 800 iterations, mean of 3 seeds: fourierf-vm constant TV 1 19.85,
-4 20.05 (one seed: TV 2 19.88); tensorf-vm constant TV 1 18.20, 4 19.02 (one seed: TV 2 18.75). 3000 iterations (P-MID),
-one seed: fourierf-vm constant TV 1 21.18 (decaying, band open by step 750: 21.06), TV 4 21.36; tensorf-vm decaying TV 1
-18.83, constant TV 4 20.84. At 3000 iterations on P-CPU's 128³ grid, one seed, it lost instead (constant TV 1 -> 4:
-fourierf-vm 21.22 -> 20.94, tensorf-vm 21.15 -> 20.94), where TensoRF does not overfit. The stronger TV lifts TensoRF
-more than FourieRF: it shrinks the P-MID fern test gap from +2.85 to +0.25 dB (3 seeds), and with Floaters-No-More
-on top tensorf-vm leads by 0.54 dB on test (3 seeds; BENCHMARKS.md); on fourierf-vm it does nothing there (val 21.36 ->
-21.33)."""
+"""Forward-facing scenes, both methods, runs over ``REAL_SHORT_TV_UP_TO`` iterations: a constant TV weight on the
+density and appearance planes (the paper's 1.0, TensoRF's decaying to 0.1). Fern val at grid lr 0.08, 800 iterations,
+mean of 3 seeds: fourierf-vm constant TV 1 19.85, 4 20.05 (one seed: TV 2 19.88); tensorf-vm constant TV 1 18.20, 4
+19.02 (one seed: TV 2 18.75). 3000 iterations (P-MID), one seed: fourierf-vm constant TV 1 21.18 (decaying, band open by
+step 750: 21.06), TV 4 21.36; tensorf-vm decaying TV 1 18.83, constant TV 4 20.84. At 3000 iterations on P-CPU's 128³
+grid, one seed, it lost instead (constant TV 1 -> 4: fourierf-vm 21.22 -> 20.94, tensorf-vm 21.15 -> 20.94), where
+TensoRF does not overfit. The stronger TV lifts TensoRF more than FourieRF: it shrinks the P-MID fern test gap from
++2.85 to +0.25 dB (3 seeds), and with Floaters-No-More on top tensorf-vm leads by 0.54 dB on test (3 seeds;
+BENCHMARKS.md); on fourierf-vm it does nothing there (val 21.36 -> 21.33)."""
 
 
 def _tv(weight: float) -> dict[str, Any]:
@@ -134,6 +134,20 @@ Objects keep the paper's 20 % at any budget: with the object rule's TV it beat h
 22.71 against 22.52 at TV 2), and at 3000 it beat half the run at TV 1 (21.97 against 21.63)."""
 
 
+REAL_SHORT_TV_WEIGHT = 6.0
+"""Forward-facing scenes, both methods, runs up to ``REAL_SHORT_TV_UP_TO`` iterations: the constant TV weight in place
+of ``REAL_TV_WEIGHT``. Fern val (P-CPU's 64³ -> 128³, 1024 rays, 800 iterations, 3 seeds, TV 4 -> 6, each method on the
+rest of its rule): fourierf-vm (density filtered on the image plane, ``REAL_DENSITY_AXES``) 20.28 -> 20.41 (+0.07,
+-0.37, +0.71 a seed; test 19.65 -> 19.83), tensorf-vm 19.16 -> 19.48 (+0.33, +0.34, +0.31; test 18.26 -> 18.72).
+fourierf-vm at TV 2 read 20.02 and at TV 8 19.96 (seed 20211202). tensorf-vm with Floaters-No-More, in no rule, read
+lower at TV 6 (20.69 -> 20.60, 3 seeds). Longer runs keep TV 4 (``REAL_TV_WEIGHT``): at 3000 iterations (P-MID,
+band open by step 800, without the revival) fourierf-vm's TV 6 read lower on seeds 1 and 2 (21.12 / 20.82 against
+21.18 / 20.99); 1500 iterations were not tried at TV 6."""
+
+REAL_SHORT_TV_UP_TO = REAL_RAMP_ITERATIONS
+"""The longest forward-facing run that gets ``REAL_SHORT_TV_WEIGHT``: 800 iterations, the budget it was measured at
+(shorter runs, previews and tests, follow it as they follow ``REAL_DENSITY_AXES``)."""
+
 REAL_DENSITY_AXES = (0, 1)
 """Forward-facing scenes, FourieRF, runs up to ``REAL_DENSITY_AXES_UP_TO`` iterations: the density curriculum on the
 image plane only (x and y); NDC depth (z) is unfiltered from the first step
@@ -144,10 +158,7 @@ Where the band opens before the run ends it lost: 1500 iterations (band open by 
 -0.57, +0.11), 3000 20.97 -> 20.30 (every seed, -0.51 to -0.79). With Floaters-No-More as well it fell to 17.78 (800,
 seed 20211202; FNM on every axis 19.85). A prototype that held z's band narrower than x's and y's lost at 800 (seed
 20211202: half the cutoff 19.64, the cutoff squared 19.89, against 20.08). Objects keep every axis (lego P-CPU, x and
-y, seed 20211202: 23.07 -> 22.86). On top of it fourierf-vm's best val mean is at TV 6 (20.42, 3 seeds; TV 2 20.02,
-TV 8 19.96 on seed 20211202), and plain TensoRF's at TV 6 too (19.16 -> 19.48, 3 seeds, every seed higher);
-``REAL_TV_WEIGHT`` stays 4 until a session changes it for short forward-facing runs with its tests (fourierf-vm's
-lead rests on two seeds of three)."""
+y, seed 20211202: 23.07 -> 22.86). On top of it both methods' best val mean is at TV 6 (``REAL_SHORT_TV_WEIGHT``)."""
 
 REAL_DENSITY_AXES_UP_TO = REAL_RAMP_ITERATIONS
 """The longest forward-facing run that gets ``REAL_DENSITY_AXES``: the runs whose band opens over the whole run (the
@@ -203,6 +214,11 @@ def ramp_fraction(scene_preset: str, iterations: int) -> float | None:
     return None
 
 
+def real_tv_weight(scene_preset: str, iterations: int) -> float | None:
+    """The rule's TV weight for a short forward-facing run (None: the rule's table, ``REAL_TV_WEIGHT``)."""
+    return REAL_SHORT_TV_WEIGHT if scene_preset == "real" and iterations <= REAL_SHORT_TV_UP_TO else None
+
+
 def density_axes(scene_preset: str, iterations: int) -> tuple[int, ...] | None:
     """The rule's density-filtered axes for a FourieRF run (None: the preset's, every axis): a short forward-facing run
     filters the density on the image plane only."""
@@ -236,6 +252,9 @@ def short_run_settings(method: str, scene_preset: str, iterations: int, backgrou
         return {}
     settings = SHORT_RUN_SETTINGS[(method, scene_preset)] | object_components(scene_preset, iterations)
     settings |= object_background(scene_preset, iterations, background)
+    short_tv = real_tv_weight(scene_preset, iterations)
+    if short_tv is not None:
+        settings |= _tv(short_tv)
     fourierf = method == "fourierf-vm"
     by_step = {
         "pipeline.model.fourier.ramp_fraction": ramp_fraction(scene_preset, iterations) if fourierf else None,

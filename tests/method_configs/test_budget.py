@@ -21,6 +21,8 @@ from fourierf_plugin.method_configs.budget import (
     REAL_OCCUPANCY_STEP,
     REAL_RAMP_ITERATIONS,
     REAL_REVIVE_AT_ONCE_ABOVE,
+    REAL_SHORT_TV_UP_TO,
+    REAL_SHORT_TV_WEIGHT,
     REAL_TV_WEIGHT,
     SHORT_RUN_SETTINGS,
     short_run_settings,
@@ -62,7 +64,8 @@ def test_rule_is_a_function_of_the_iteration_count() -> None:
     assert short_run_settings("fourierf-vm", "synthetic", 3000, "black") == short, "scored on black: not measured"
     assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS) == {}
     real = {"optimizer.lr_grids": 0.08, "pipeline.model.tv_decay_ratio": 1.0}
-    real |= {"pipeline.model.tv_weight_density": REAL_TV_WEIGHT, "pipeline.model.tv_weight_appearance": REAL_TV_WEIGHT}
+    tv = REAL_SHORT_TV_WEIGHT
+    real |= {"pipeline.model.tv_weight_density": tv, "pipeline.model.tv_weight_appearance": tv}
     real_800 = real | {"pipeline.model.occupancy_update_fractions": (0.25,)}
     axes = {"pipeline.model.fourier.density_axes": REAL_DENSITY_AXES}
     assert short_run_settings("fourierf-vm", "real", 800) == real_800 | axes, "the curriculum on the image plane"
@@ -173,7 +176,7 @@ def test_paper_preset_keeps_the_papers_values_at_any_budget() -> None:
 
 @pytest.mark.parametrize("method", ["fourierf-vm", "tensorf-vm"])
 def test_forward_facing_short_run_gets_the_faster_grid_rate_and_constant_tv(llff_scene: Path, method: str) -> None:
-    config, _ = finished(method, llff_scene)
+    config, _ = finished(method, llff_scene, "--max-num-iterations", "3000")
     assert config.scene_preset == "real"
     assert config.optimizer.lr_grids == 0.08
     model = config.pipeline.model
@@ -194,6 +197,27 @@ def test_a_longer_forward_facing_run_opens_the_band_by_step_800(llff_scene: Path
     assert any("kept your pipeline.model.fourier.ramp_fraction" in n for n in notes)
     short, _ = finished("fourierf-vm", llff_scene, "--max-num-iterations", str(REAL_RAMP_ITERATIONS))
     assert short.pipeline.model.fourier.ramp_fraction == 1.0, "a short run keeps the whole-run ramp that won at 800"
+
+
+@pytest.mark.parametrize("method", ["fourierf-vm", "tensorf-vm"])
+def test_a_run_of_up_to_800_forward_facing_iterations_gets_the_stronger_tv(llff_scene: Path, method: str) -> None:
+    tv = ("pipeline.model.tv_weight_density", "pipeline.model.tv_weight_appearance")
+    assert REAL_SHORT_TV_WEIGHT > REAL_TV_WEIGHT and REAL_SHORT_TV_UP_TO == 800
+    for iterations in (100, REAL_SHORT_TV_UP_TO):
+        settings = short_run_settings(method, "real", iterations)
+        assert [settings[path] for path in tv] == [REAL_SHORT_TV_WEIGHT] * 2, iterations
+    longer = short_run_settings(method, "real", REAL_SHORT_TV_UP_TO + 1)
+    assert [longer[path] for path in tv] == [REAL_TV_WEIGHT] * 2, "longer runs: TV 4"
+    objects = short_run_settings(method, "synthetic", 800)
+    assert [objects[path] for path in tv] == [OBJECT_TV_WEIGHT] * 2, "objects: their own rule"
+    config, notes = finished(method, llff_scene, "--max-num-iterations", "800")
+    model = config.pipeline.model
+    assert model.tv_weight_density == model.tv_weight_appearance == REAL_SHORT_TV_WEIGHT
+    assert model.tv_decay_ratio == 1.0
+    assert any(n.startswith("budget rule") and f"tv_weight_density={REAL_SHORT_TV_WEIGHT}" in n for n in notes)
+    mine, _ = finished(method, llff_scene, "--max-num-iterations", "800", "--pipeline.model.tv-weight-density", "4")
+    assert mine.pipeline.model.tv_weight_density == 4.0, "a flag wins"
+    assert mine.pipeline.model.tv_weight_appearance == REAL_SHORT_TV_WEIGHT, "the other weight follows the rule"
 
 
 def test_a_short_forward_facing_run_filters_the_density_on_the_image_plane_only(llff_scene: Path) -> None:

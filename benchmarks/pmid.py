@@ -447,10 +447,21 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "wd0-nodecay-lr0.04-tv4-comp8-bgwarm": [*LEGO_TV4, *components(8, 24), *RANDOM_AFTER_UPDATE],
         # Session 45: the density curriculum on x and y only (fern's image plane; on lego z is up, not depth).
         "wd0-nodecay-lr0.04-tv4-comp8-bgwarm-zfree": [*LEGO_TV4, *components(8, 24), *RANDOM_AFTER_UPDATE, *DENSITY_XY],
-        # Session 46: the curriculum on the geometry only, the colour band open from the first step (f0 colour 1).
-        "wd0-nodecay-lr0.04-tv4-comp8-bgwarm-f0c1": [
-            *LEGO_TV4, *components(8, 24), *RANDOM_AFTER_UPDATE, F0_COLOR, "1.0",
-        ],
+        # Session 46: the colour's first band alone: open from the first step (the curriculum on the geometry only), or
+        # narrower than the density's 0.3.
+        **{
+            f"wd0-nodecay-lr0.04-tv4-comp8-bgwarm-f0c{name}": [
+                *LEGO_TV4, *components(8, 24), *RANDOM_AFTER_UPDATE, F0_COLOR, f0,
+            ]
+            for name, f0 in (("1", "1.0"), ("0.1", "0.1"), ("0.05", "0.05"))
+        },
+        # ... and the colour band held below the spectrum to the end (the geometry's opens fully).
+        **{
+            f"wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ffinalc{f}": [
+                *LEGO_TV4, *components(8, 24), *RANDOM_AFTER_UPDATE, F_FINAL_COLOR, f,
+            ]
+            for f in ("0.7", "0.5")
+        },
         "wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm": [
             *LEGO_TV4, *components(8, 24), *first_band("0.05"), *RANDOM_AFTER_UPDATE],
         "wd0-nodecay-lr0.04-tv6-bgwarm": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_AFTER_UPDATE],
@@ -557,6 +568,9 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-tvconst-ramp0.5333-tv4": fern_rule("0.5333"),
         "lr0.08-tvconst-ramp0.5333-tv4-revive1": [*fern_rule("0.5333"), *REVIVE1],
         "lr0.08-tvconst-tv4-revive1": [*FERN_TV4, *REVIVE1],
+        # Session 46: the short-run rule's TV 6 at 1500 iterations, for both methods (its boundary is 800).
+        "lr0.08-tvconst-ramp0.5333-tv6-revive1": [*fern_rule("0.5333", tv=6.0), *REVIVE1],
+        "lr0.08-tvconst-tv6-revive1": [*fern_tv(6), *REVIVE1],
         # ... and at 3000 iterations the band open by step 1500 instead of 800.
         "lr0.08-tvconst-ramp0.5-tv4-revive1": [*fern_rule("0.5"), *REVIVE1],
         # Session 26: half TensoRF's component counts (lego's object rule gained 0.14 dB over 3 seeds at P-CPU) on
@@ -614,8 +628,8 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # Session 46: on the image-plane curriculum at TV 6, the band's start and speed searched again (the preset's
         # f0 0.01 and whole-run ramp were chosen with every axis filtered), the grid lr and depth smoothness, and the
         # density band open from the start (appearance curriculum only). (Throwaway prototypes, not kept, filtered the
-        # appearance on x and y only, 18.72, or held its z band at the cutoff squared, 20.35, or cubed, 20.07, against
-        # 20.51.)
+        # appearance on x and y only, 18.72, or on z only, 19.75, or held its z band at the cutoff squared, 20.35, or
+        # cubed, 20.07, against 20.51.)
         **{
             f"lr0.08-tvconst-tv6-alphamask0.25-zfree-f0d{f0}": [
                 *fern_tv(6), *OCCUPANCY_AT_STEP_200, *DENSITY_XY, F0_DENSITY, f0,
@@ -626,6 +640,12 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
             *fern_tv(6), *OCCUPANCY_AT_STEP_200, *DENSITY_XY, RAMP, "0.75",
         ],
         "lr0.08-tvconst-tv6-alphamask0.25-f0d1": [*fern_tv(6), *OCCUPANCY_AT_STEP_200, F0_DENSITY, "1.0"],
+        # ... and Floaters-No-More, tensorf-vm's lever, which with every axis filtered did nothing for fourierf-vm and
+        # with z unfiltered at TV 4 fell to 17.78: from the first step, and from step 400 on.
+        "lr0.08-tvconst-tv6-fnm-alphamask0.25-zfree": [*fern_tv(6), *FNM, *OCCUPANCY_AT_STEP_200, *DENSITY_XY],
+        "lr0.08-tvconst-tv6-fnm-fnmfrom0.5-alphamask0.25-zfree": [
+            *fern_tv(6), *FNM, FNM_FROM, "0.5", *OCCUPANCY_AT_STEP_200, *DENSITY_XY,
+        ],
         "lr0.12-tvconst-tv6-alphamask0.25-zfree": [
             "--optimizer.lr-grids", "0.12", *TV_CONST, *tv_weights(6.0), *OCCUPANCY_AT_STEP_200, *DENSITY_XY,
         ],
@@ -856,12 +876,17 @@ def equal_time_lines(results: dict[str, dict]) -> list[str]:
 
 
 RULE_ALONG_THE_BUDGET = {
-    "fourierf-vm": (("pcpu", "lr0.08-tvconst-tv4"), ("pcpu3000", "lr0.08-tvconst-ramp0.2667-tv4-revive1")),
-    "tensorf-vm": (("pcpu", "lr0.08-tvconst-tv4"), ("pcpu3000", "lr0.08-tvconst-tv4")),
+    "fourierf-vm": (
+        ("pcpu", "lr0.08-tvconst-tv6-alphamask0.25-zfree"),
+        ("pcpu3000", "lr0.08-tvconst-ramp0.2667-tv4-revive1"),
+    ),
+    "tensorf-vm": (("pcpu", "lr0.08-tvconst-tv6-alphamask0.25"), ("pcpu3000", "lr0.08-tvconst-tv4")),
 }
-"""fern, each method: the budget rule's settings at 800 and at 3000 iterations of P-CPU's sizes (grid lr 0.08, constant
-TV 4; fourierf-vm's band opens over the whole 800-iteration run and over the first 800 of the 3000, and the longer run
-revives a dark density field at its first dark batch)."""
+"""fern, each method: the budget rule's settings at 800 and at 3000 iterations of P-CPU's sizes (grid lr 0.08; at 800
+constant TV 6 and the occupancy update at step 200, fourierf-vm's band opening over the whole run with the density
+filtered on the image plane; at 3000 constant TV 4, fourierf-vm's band open over the first 800 on every axis and a
+dark density field revived at its first dark batch; tensorf-vm's 3000-iteration row, run before that revival joined
+the rule, waits for a fresh field)."""
 
 
 RULE_AT_800 = {

@@ -142,11 +142,12 @@ rest of its rule): fourierf-vm (density filtered on the image plane, ``REAL_DENS
 fourierf-vm at TV 2 read 20.02 and at TV 8 19.96 (seed 20211202). tensorf-vm with Floaters-No-More, in no rule, read
 lower at TV 6 (20.69 -> 20.60, 3 seeds). Longer runs keep TV 4 (``REAL_TV_WEIGHT``): at 3000 iterations (P-MID,
 band open by step 800, without the revival) fourierf-vm's TV 6 read lower on seeds 1 and 2 (21.12 / 20.82 against
-21.18 / 20.99); 1500 iterations were not tried at TV 6."""
+21.18 / 20.99); at 1500 (P-CPU's sizes, band open by step 800, the revival at once; seeds 20211202 and 1) fourierf-vm
+lost on both (20.36 / 20.21 -> 20.26 / 20.07) and tensorf-vm tied (20.22 / 20.48 -> 20.38 / 20.37)."""
 
 REAL_SHORT_TV_UP_TO = REAL_RAMP_ITERATIONS
-"""The longest forward-facing run that gets ``REAL_SHORT_TV_WEIGHT``: 800 iterations, the budget it was measured at
-(shorter runs, previews and tests, follow it as they follow ``REAL_DENSITY_AXES``)."""
+"""The longest forward-facing run that gets ``REAL_SHORT_TV_WEIGHT``: 800 iterations, where it won for both methods
+(at 1500 fourierf-vm lost); shorter runs, previews and tests, follow it as they follow ``REAL_DENSITY_AXES``."""
 
 REAL_DENSITY_AXES = (0, 1)
 """Forward-facing scenes, FourieRF, runs up to ``REAL_DENSITY_AXES_UP_TO`` iterations: the density curriculum on the

@@ -277,9 +277,16 @@ FERN_PMID_RULE = fern_rule("0.2667")
 settings of sessions 19, 23 and 24 vary."""
 
 
-def fern_tv(tv: float) -> list[str]:
-    """The forward-facing rule at 800 iterations with a constant TV weight ``tv`` (grid lr 0.08; the preset's band)."""
-    return ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(tv)]
+def fern_tv(tv: float, lr: str = "0.08") -> list[str]:
+    """The forward-facing rule at 800 iterations with a constant TV weight ``tv`` at grid lr ``lr`` (the preset's
+    band)."""
+    return ["--optimizer.lr-grids", lr, *TV_CONST, *tv_weights(tv)]
+
+
+def fern_image_plane(tv: float, lr: str = "0.08") -> list[str]:
+    """``fern_tv`` with the occupancy update at step 200 and the density curriculum on the image plane: fourierf-vm's
+    forward-facing rule at 800 iterations since session 45 (TV 6 since session 46)."""
+    return [*fern_tv(tv, lr), *OCCUPANCY_AT_STEP_200, *DENSITY_XY]
 
 
 FERN_TV4 = fern_tv(4.0)
@@ -617,7 +624,7 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # the TV weight chosen without it (4) a step or two either way.
         "lr0.08-tvconst-tv4-alphamask0.25-zfree-mirror": [*FERN_TV4, *OCCUPANCY_AT_STEP_200, *DENSITY_XY, *MIRROR],
         **{
-            f"lr0.08-tvconst-tv{tv}-alphamask0.25-zfree": [*fern_tv(tv), *OCCUPANCY_AT_STEP_200, *DENSITY_XY]
+            f"lr0.08-tvconst-tv{tv}-alphamask0.25-zfree": fern_image_plane(tv)
             for tv in (2, 6, 8)
         },
         # ... and, since fourierf-vm's best val mean moved to TV 6 there, tensorf-vm's val choice (TV 4 with FNM) at
@@ -632,25 +639,25 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # cubed, 20.07, against 20.51.)
         **{
             f"lr0.08-tvconst-tv6-alphamask0.25-zfree-f0d{f0}": [
-                *fern_tv(6), *OCCUPANCY_AT_STEP_200, *DENSITY_XY, F0_DENSITY, f0,
+                *fern_image_plane(6), F0_DENSITY, f0,
             ]
             for f0 in ("0.05", "0.1")
         },
         "lr0.08-tvconst-tv6-alphamask0.25-zfree-ramp0.75": [
-            *fern_tv(6), *OCCUPANCY_AT_STEP_200, *DENSITY_XY, RAMP, "0.75",
+            *fern_image_plane(6), RAMP, "0.75",
         ],
         "lr0.08-tvconst-tv6-alphamask0.25-f0d1": [*fern_tv(6), *OCCUPANCY_AT_STEP_200, F0_DENSITY, "1.0"],
         # ... and Floaters-No-More, tensorf-vm's lever, which with every axis filtered did nothing for fourierf-vm and
         # with z unfiltered at TV 4 fell to 17.78: from the first step, and from step 400 on.
-        "lr0.08-tvconst-tv6-fnm-alphamask0.25-zfree": [*fern_tv(6), *FNM, *OCCUPANCY_AT_STEP_200, *DENSITY_XY],
+        "lr0.08-tvconst-tv6-fnm-alphamask0.25-zfree": [*fern_image_plane(6), *FNM],
         "lr0.08-tvconst-tv6-fnm-fnmfrom0.5-alphamask0.25-zfree": [
-            *fern_tv(6), *FNM, FNM_FROM, "0.5", *OCCUPANCY_AT_STEP_200, *DENSITY_XY,
+            *fern_image_plane(6), *FNM, FNM_FROM, "0.5",
         ],
         "lr0.12-tvconst-tv6-alphamask0.25-zfree": [
-            "--optimizer.lr-grids", "0.12", *TV_CONST, *tv_weights(6.0), *OCCUPANCY_AT_STEP_200, *DENSITY_XY,
+            *fern_image_plane(6, lr="0.12"),
         ],
         "lr0.08-tvconst-tv6-alphamask0.25-zfree-ds1": [
-            *fern_tv(6), *OCCUPANCY_AT_STEP_200, *DENSITY_XY, *depth_smoothness(1.0),
+            *fern_image_plane(6), *depth_smoothness(1.0),
         ],
     },
 }  # fmt: skip

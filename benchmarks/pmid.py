@@ -320,6 +320,11 @@ def depth_smoothness(weight: float) -> list[str]:
     return ["--pipeline.model.depth-smoothness-weight", str(weight)]
 
 
+def distortion(weight: str) -> list[str]:
+    """mip-NeRF 360's distortion loss at ``weight`` on the training rays."""
+    return ["--pipeline.model.distortion-weight", weight]
+
+
 TV_LOW = tv_weights(0.1)
 LEGO_TV4 = [*RULE_LEGO, *tv_weights(4.0)]
 """The object rule of sessions 16-26 (TV 4), which the lego settings of sessions 20 and 25-27 vary; since session 27
@@ -659,6 +664,20 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-tvconst-tv6-alphamask0.25-zfree-ds1": [
             *fern_image_plane(6), *depth_smoothness(1.0),
         ],
+        # Session 47: mip-NeRF 360's distortion loss (one short interval of weight per ray), against the ghosting and
+        # doubled geometry, on each method's rule and on tensorf-vm's val choice (FNM).
+        **{
+            f"lr0.08-tvconst-tv6-alphamask0.25-zfree-dist{w}": [*fern_image_plane(6), *distortion(w)]
+            for w in ("0.001", "0.01", "0.1")
+        },
+        **{
+            f"lr0.08-tvconst-tv6-alphamask0.25-dist{w}": [*fern_tv(6), *OCCUPANCY_AT_STEP_200, *distortion(w)]
+            for w in ("0.001", "0.01", "0.1")
+        },
+        **{
+            f"lr0.08-tvconst-tv4-fnm-dist{w}": [*FERN_TV4, *FNM, *distortion(w)]
+            for w in ("0.001", "0.01", "0.1")
+        },
     },
 }  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband", "mirror", "zfree")

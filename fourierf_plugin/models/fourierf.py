@@ -288,6 +288,8 @@ class FourieRFModel(nn.Module):
                 rgb = rgb.clamp(0.0, 1.0)
             depth = expected_depth(weights, samples.t, torch.full_like(acc, self.far))
         out = {"rgb": rgb, "accumulation": acc, "depth": depth, "background": background}
+        if self.training and self.config.distortion_weight > 0:
+            out["distortion"] = losses.distortion(weights, (samples.t - self.near) / (self.far - self.near))
         if self.training and self.effects.occlusion_regularization:
             out["occlusion"] = occlusion_penalty(sigma, self.config.occlusion_fraction, self.config.distance_scale)
         return out
@@ -350,6 +352,8 @@ class FourieRFModel(nn.Module):
             out["l1_density"] = l1 * losses.density_l1(g.density.planes, g.density.lines)
         if "occlusion" in outputs and c.occlusion_weight > 0:
             out["occlusion"] = c.occlusion_weight * outputs["occlusion"]
+        if "distortion" in outputs:
+            out["distortion"] = c.distortion_weight * outputs["distortion"]
         return out
 
     @torch.no_grad()
@@ -523,6 +527,9 @@ class FourieRFModelConfig(InstantiateConfig):
     """Fraction of the run from which Floaters-No-More scales gradients (0: the whole run, as in its paper). While
     the band is narrow FourieRF paints no near floaters and the scaling only slows the near geometry; once the band
     is open the field trains like TensoRF's, which the scaling helps (set it to the ramp fraction for that)."""
+    distortion_weight: float = 0.0
+    """Weight of mip-NeRF 360's distortion loss on the training rays (mip-NeRF 360: 0.01), which pulls each ray's
+    weight into one short interval against floaters and doubled geometry; 0 = off."""
     depth_smoothness_weight: float = 0.0
     """RegNeRF's depth smoothness on patches seen from poses between the training cameras (RegNeRF: 0.1 on NDC depth,
     8×8 patches); 0 = off, and no extra rays are rendered."""

@@ -1,4 +1,4 @@
-"""The reference photometric and grid-regulariser losses, with TensoRF's normalisations (spec 3.6).
+"""The reference photometric, grid- and ray-regulariser losses, with TensoRF's normalisations (spec 3.6).
 
 Closed forms on ramps and constants, the spec's formula on random planes, 1-wide axes and empty batches. The TV's
 faster sum of squared differences (``accel.tv``) is compared with these in ``tests/accel/test_tv.py``.
@@ -12,6 +12,7 @@ import torch
 from fourierf_plugin.model_components.losses import (
     density_l1,
     depth_smoothness,
+    distortion,
     grid_tv,
     mse,
     total_variation_1d,
@@ -130,3 +131,41 @@ def test_depth_smoothness_penalises_a_step_by_its_height() -> None:
     patch = torch.zeros(1, 8, 8, dtype=torch.float64)
     patch[:, :, 4:] = 0.5
     assert float(depth_smoothness(patch)) == pytest.approx(0.25 / 7)
+
+
+def _distortion_by_pairs(weights: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
+    """mip-NeRF 360's definition term by term, O(N²): every pair of intervals, then each interval with itself."""
+    lengths = torch.cat([s.diff(dim=-1), torch.zeros_like(s[..., :1])], dim=-1)
+    mids = s + 0.5 * lengths
+    pairs = (weights[:, :, None] * weights[:, None, :] * (mids[:, :, None] - mids[:, None, :]).abs()).sum(dim=(1, 2))
+    return (pairs + (weights.square() * lengths).sum(dim=-1) / 3.0).mean()
+
+
+def test_distortion_matches_its_pairwise_definition() -> None:
+    generator = torch.Generator().manual_seed(3)
+    s = torch.rand(6, 40, generator=generator, dtype=torch.float64).sort(dim=-1).values
+    weights = torch.rand(6, 40, generator=generator, dtype=torch.float64)
+    weights = weights / weights.sum(dim=-1, keepdim=True) * torch.rand(6, 1, generator=generator, dtype=torch.float64)
+    assert float(distortion(weights, s)) == pytest.approx(float(_distortion_by_pairs(weights, s)), rel=1e-12)
+
+
+def test_distortion_of_one_interval_is_its_own_term_and_of_two_surfaces_their_distance() -> None:
+    """All weight in one interval of length d: w² d / 3. Half at each of two intervals D apart (d → 0): D / 2."""
+    s = torch.linspace(0.0, 1.0, 11, dtype=torch.float64)[None]
+    one = torch.zeros(1, 11, dtype=torch.float64)
+    one[0, 4] = 0.8
+    assert float(distortion(one, s)) == pytest.approx(0.64 * 0.1 / 3.0, rel=1e-12)
+    two = torch.zeros(1, 11, dtype=torch.float64)
+    two[0, 1] = two[0, 7] = 0.5
+    assert float(distortion(two, s)) == pytest.approx(2 * 0.25 * 0.6 + 2 * 0.25 * 0.1 / 3.0, rel=1e-12)
+    assert float(distortion(two, s)) > float(distortion(one, s))  # doubled geometry costs more than one surface
+
+
+def test_distortion_of_no_rays_is_zero_and_its_gradient_finite() -> None:
+    empty = torch.zeros(0, 8, requires_grad=True)
+    value = distortion(empty, torch.zeros(0, 8))
+    value.backward()
+    assert float(value.detach()) == 0.0 and empty.grad is not None
+    weights = torch.full((4, 16), 1.0 / 16, requires_grad=True)
+    distortion(weights, torch.linspace(0.0, 1.0, 16).expand(4, 16)).backward()
+    assert weights.grad is not None and bool(torch.isfinite(weights.grad).all())

@@ -99,6 +99,7 @@ RULES: tuple[Rule, ...] = (
     Rule(f"{_MODEL}.tv_decay_ratio", optional(positive), "a ratio > 0 (1 = no decay; omitted = the lr's)", "0.1"),
     Rule(f"{_MODEL}.occlusion_weight", at_least(0.0), "a weight >= 0", "0.01"),
     Rule(f"{_MODEL}.depth_smoothness_weight", at_least(0.0), "a weight >= 0 (0 = off)", "0.1"),
+    Rule(f"{_MODEL}.distortion_weight", at_least(0.0), "a weight >= 0 (0 = off)", "0.01"),
     Rule(f"{_MODEL}.depth_smoothness_patches", int_at_least(1), "an integer >= 1", "4"),
     Rule(f"{_MODEL}.depth_smoothness_patch_size", int_at_least(2), "a patch side >= 2 pixels", "8"),
     Rule(f"{_MODEL}.cull_weight_threshold", within(0.0, 1.0), "a weight in [0, 1] (0 = off)", "1e-4"),

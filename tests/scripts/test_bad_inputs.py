@@ -329,6 +329,7 @@ CASES: dict[str, Case] = {
         "train", train_with(f"{MODEL}.fourier.plane-leakage", "-1"), ("plane-leakage -1", ">= 0")
     ),
     "train: negative depth-smoothness weight": out_of_range(f"{MODEL}.depth-smoothness-weight", "-1", ">= 0"),
+    "train: negative distortion weight": out_of_range(f"{MODEL}.distortion-weight", "-0.01", ">= 0"),
     "train: zero depth-smoothness patches": out_of_range(f"{MODEL}.depth-smoothness-patches", "0", ">= 1"),
     "train: floaters scaling from past the run": out_of_range(
         f"{MODEL}.floaters-gradient-scaling-from", "1.5", "[0, 1]"

@@ -287,9 +287,9 @@ class FourieRFModel(nn.Module):
             if not self.training:
                 rgb = rgb.clamp(0.0, 1.0)
             depth = expected_depth(weights, samples.t, torch.full_like(acc, self.far))
-        out = {"rgb": rgb, "accumulation": acc, "depth": depth, "background": background}
-        if self.training and self.config.distortion_weight > 0:
-            out["distortion"] = losses.distortion(weights, (samples.t - self.near) / (self.far - self.near))
+            out = {"rgb": rgb, "accumulation": acc, "depth": depth, "background": background}
+            if self.training and self.config.distortion_weight > 0:
+                out["distortion"] = losses.distortion(weights, (samples.t - self.near) / (self.far - self.near))
         if self.training and self.effects.occlusion_regularization:
             out["occlusion"] = occlusion_penalty(sigma, self.config.occlusion_fraction, self.config.distance_scale)
         return out

@@ -298,10 +298,15 @@ def fern_tv(tv: float, lr: str = "0.08") -> list[str]:
     return ["--optimizer.lr-grids", lr, *TV_CONST, *tv_weights(tv)]
 
 
+def fern_short(tv: float, lr: str = "0.08") -> list[str]:
+    """``fern_tv`` with the occupancy update at step 200: tensorf-vm's forward-facing rule at 800 iterations."""
+    return [*fern_tv(tv, lr), *OCCUPANCY_AT_STEP_200]
+
+
 def fern_image_plane(tv: float, lr: str = "0.08") -> list[str]:
-    """``fern_tv`` with the occupancy update at step 200 and the density curriculum on the image plane: fourierf-vm's
-    forward-facing rule at 800 iterations since session 45 (TV 6 since session 46)."""
-    return [*fern_tv(tv, lr), *OCCUPANCY_AT_STEP_200, *DENSITY_XY]
+    """``fern_short`` with the density curriculum on the image plane: fourierf-vm's forward-facing rule at 800
+    iterations since session 45 (TV 6 since session 46)."""
+    return [*fern_short(tv, lr), *DENSITY_XY]
 
 
 FERN_TV4 = fern_tv(4.0)
@@ -335,6 +340,11 @@ def depth_smoothness(weight: float) -> list[str]:
     return ["--pipeline.model.depth-smoothness-weight", str(weight)]
 
 
+def occlusion(weight: str) -> list[str]:
+    """FreeNeRF's occlusion term at ``weight`` (the preset's 0.01; 0 = off)."""
+    return ["--pipeline.model.occlusion-weight", weight]
+
+
 def distortion(weight: str) -> list[str]:
     """mip-NeRF 360's distortion loss at ``weight`` on the training rays."""
     return ["--pipeline.model.distortion-weight", weight]
@@ -344,6 +354,11 @@ TV_LOW = tv_weights(0.1)
 LEGO_TV4 = [*RULE_LEGO, *tv_weights(4.0)]
 """The object rule of sessions 16-26 (TV 4), which the lego settings of sessions 20 and 25-27 vary; since session 27
 the rule also has half the components (``...-tv4-comp8``)."""
+LEGO_COMP8 = [*LEGO_TV4, *components(8, 24)]
+"""``LEGO_TV4`` with half TensoRF's components (8 density, 24 appearance): ``...-tv4-comp8``."""
+LEGO_BGWARM = [*LEGO_COMP8, *RANDOM_AFTER_UPDATE]
+"""``LEGO_COMP8`` on a random background from the first occupancy update on: ``...-tv4-comp8-bgwarm``, the object
+rule's settings today."""
 SETTINGS: dict[str, dict[str, list[str]]] = {
     # Object scenes: the synthetic preset and the levers the issue names (weight decay, lr decay, TV, f0/Δ).
     "lego": {
@@ -420,29 +435,29 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # at step 1500, stopped), as it did tensorf-vm's (9.6 above): not usable without a guard.
         "wd0-nodecay-lr0.04-tv4-f0.05-bgrand": [*LEGO_TV4, *first_band("0.05"), *RANDOM_BACKGROUND],
         "wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgrand": [
-            *LEGO_TV4, *components(8, 24), *first_band("0.05"), *RANDOM_BACKGROUND,
+            *LEGO_COMP8, *first_band("0.05"), *RANDOM_BACKGROUND,
         ],
-        "wd0-nodecay-lr0.04-tv4-comp8": [*LEGO_TV4, *components(8, 24)],
+        "wd0-nodecay-lr0.04-tv4-comp8": [*LEGO_COMP8],
         "wd0-nodecay-lr0.04-tv6-comp8": [*RULE_LEGO, *tv_weights(6.0), *components(8, 24)],
         "wd0-nodecay-lr0.04-tv4-comp4": [*LEGO_TV4, *components(4, 12)],
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.1": [*LEGO_TV4, *components(8, 24), *first_band("0.1")],
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.05": [*LEGO_TV4, *components(8, 24), *first_band("0.05")],
+        "wd0-nodecay-lr0.04-tv4-comp8-f0.1": [*LEGO_COMP8, *first_band("0.1")],
+        "wd0-nodecay-lr0.04-tv4-comp8-f0.05": [*LEGO_COMP8, *first_band("0.05")],
         # Session 26: a band that stops short of the whole spectrum at P-MID, where 2400 iterations follow the ramp.
         "wd0-nodecay-lr0.04-tv4-ffinald0.7": [*LEGO_TV4, F_FINAL, "0.7", F_FINAL_COLOR, "1.0"],
         # Session 27: the final grid from step 8 (one upsample at 1 % of the run) instead of TensoRF's 64³ -> 128³ over
         # two upsamples: the band's opening is then the only coarse-to-fine schedule, where a bare TensoRF overfits.
-        "wd0-nodecay-lr0.04-tv4-comp8-up0.01": [*LEGO_TV4, *components(8, 24), *EARLY_FINAL_GRID],
+        "wd0-nodecay-lr0.04-tv4-comp8-up0.01": [*LEGO_COMP8, *EARLY_FINAL_GRID],
         "wd0-nodecay-lr0.04-tv4-comp8-f0.05-up0.01": [
-            *LEGO_TV4, *components(8, 24), *first_band("0.05"), *EARLY_FINAL_GRID],
+            *LEGO_COMP8, *first_band("0.05"), *EARLY_FINAL_GRID],
         "wd0-nodecay-lr0.04-tv4-comp8-f0.05-ramp0.5-up0.01": [
-            *LEGO_TV4, *components(8, 24), *first_band("0.05"), RAMP, "0.5", *EARLY_FINAL_GRID],
+            *LEGO_COMP8, *first_band("0.05"), RAMP, "0.5", *EARLY_FINAL_GRID],
         # Session 27: P-CPU's val choice lost 0.8 dB at 1500 iterations; does the initial noise waiting outside its
         # narrow first band (weight decay 0 keeps it) explain it?
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-inband": [*LEGO_TV4, *components(8, 24), *first_band("0.05"), *IN_BAND],
+        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-inband": [*LEGO_COMP8, *first_band("0.05"), *IN_BAND],
         # Session 29: mirror boundaries (nothing wraps across the box's faces while the band is narrow), on the rule
         # and with the narrow first band.
-        "wd0-nodecay-lr0.04-tv4-comp8-mirror": [*LEGO_TV4, *components(8, 24), *MIRROR],
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-mirror": [*LEGO_TV4, *components(8, 24), *first_band("0.05"), *MIRROR],
+        "wd0-nodecay-lr0.04-tv4-comp8-mirror": [*LEGO_COMP8, *MIRROR],
+        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-mirror": [*LEGO_COMP8, *first_band("0.05"), *MIRROR],
         # Session 27: the narrow first band's renders at 1500 show holes in the body: is it the occupancy grid's first
         # update (20 % of the run, the step the band opens fully) pruning cells the band-limited field has not filled?
         "wd0-nodecay-lr0.04-tv4-f0.05-alphamask0.3": [*LEGO_TV4, *first_band("0.05"), *LATE_ALPHA_MASK],
@@ -454,16 +469,16 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # the weaker, noisier pull of object pixels on a random background?
         "wd0-nodecay-lr0.04-tv4-bgrand-l1off": [*LEGO_TV4, *RANDOM_BACKGROUND, *L1_OFF],
         "wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgrand-l1off": [
-            *LEGO_TV4, *components(8, 24), *first_band("0.05"), *RANDOM_BACKGROUND, *L1_OFF],
+            *LEGO_COMP8, *first_band("0.05"), *RANDOM_BACKGROUND, *L1_OFF],
         # It is (both lit and ended at 21.64 and 23.19 without it). Which part helps: the L1's absence or the random
         # background, and does the L1 once the field has lit (from the first occupancy update) empty it again?
-        "wd0-nodecay-lr0.04-tv4-comp8-l1off": [*LEGO_TV4, *components(8, 24), *L1_OFF],
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-l1off": [*LEGO_TV4, *components(8, 24), *first_band("0.05"), *L1_OFF],
-        "wd0-nodecay-lr0.04-tv4-comp8-bgrand-l1off": [*LEGO_TV4, *components(8, 24), *RANDOM_BACKGROUND, *L1_OFF],
+        "wd0-nodecay-lr0.04-tv4-comp8-l1off": [*LEGO_COMP8, *L1_OFF],
+        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-l1off": [*LEGO_COMP8, *first_band("0.05"), *L1_OFF],
+        "wd0-nodecay-lr0.04-tv4-comp8-bgrand-l1off": [*LEGO_COMP8, *RANDOM_BACKGROUND, *L1_OFF],
         "wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgrand-l1late": [
-            *LEGO_TV4, *components(8, 24), *first_band("0.05"), *RANDOM_BACKGROUND, *L1_LATE],
+            *LEGO_COMP8, *first_band("0.05"), *RANDOM_BACKGROUND, *L1_LATE],
         "wd0-nodecay-lr0.04-tv4-comp8-f0.03-bgrand-l1off": [
-            *LEGO_TV4, *components(8, 24), *first_band("0.03"), *RANDOM_BACKGROUND, *L1_OFF],
+            *LEGO_COMP8, *first_band("0.03"), *RANDOM_BACKGROUND, *L1_OFF],
         "wd0-nodecay-lr0.04-tv4-f0.05-bgrand-l1off": [*LEGO_TV4, *first_band("0.05"), *RANDOM_BACKGROUND, *L1_OFF],
         # Session 30: both random-background runs at P-MID (no L1: val 20.99; L1 from the first occupancy update:
         # 21.71, against the rule's 22.50) kept the fog a fresh field starts with wherever no training ray crosses the
@@ -471,37 +486,37 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # showed at its edges. So the random background now starts after the first occupancy update (white and
         # TensoRF's L1 before it): the field lights, the L1 clears the fog, the box shrinks.
         "wd0-nodecay-lr0.04-tv4-bgwarm": [*LEGO_TV4, *RANDOM_AFTER_UPDATE],
-        "wd0-nodecay-lr0.04-tv4-comp8-bgwarm": [*LEGO_TV4, *components(8, 24), *RANDOM_AFTER_UPDATE],
+        "wd0-nodecay-lr0.04-tv4-comp8-bgwarm": [*LEGO_BGWARM],
         # Session 45: the density curriculum on x and y only (fern's image plane; on lego z is up, not depth).
-        "wd0-nodecay-lr0.04-tv4-comp8-bgwarm-zfree": [*LEGO_TV4, *components(8, 24), *RANDOM_AFTER_UPDATE, *DENSITY_XY],
+        "wd0-nodecay-lr0.04-tv4-comp8-bgwarm-zfree": [*LEGO_BGWARM, *DENSITY_XY],
         # Session 46: the colour's first band alone: open from the first step (the curriculum on the geometry only), or
         # narrower than the density's 0.3.
         **{
             f"wd0-nodecay-lr0.04-tv4-comp8-bgwarm-f0c{name}": [
-                *LEGO_TV4, *components(8, 24), *RANDOM_AFTER_UPDATE, F0_COLOR, f0,
+                *LEGO_BGWARM, F0_COLOR, f0,
             ]
             for name, f0 in (("1", "1.0"), ("0.1", "0.1"), ("0.05", "0.05"))
         },
         # ... and the colour band held below the spectrum to the end (the geometry's opens fully).
         **{
             f"wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ffinalc{f}": [
-                *LEGO_TV4, *components(8, 24), *RANDOM_AFTER_UPDATE, F_FINAL_COLOR, f,
+                *LEGO_BGWARM, F_FINAL_COLOR, f,
             ]
             for f in ("0.7", "0.5")
         },
         "wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm": [
-            *LEGO_TV4, *components(8, 24), *first_band("0.05"), *RANDOM_AFTER_UPDATE],
+            *LEGO_COMP8, *first_band("0.05"), *RANDOM_AFTER_UPDATE],
         # Session 47: mip-NeRF 360's distortion loss on each method's val choice: fourierf-vm 23.17 at 0.01 and 22.16
         # at 0.1 against 23.18.
         **{
             f"wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-dist{w}": [
-                *LEGO_TV4, *components(8, 24), *first_band("0.05"), *RANDOM_AFTER_UPDATE, *distortion(w),
+                *LEGO_COMP8, *first_band("0.05"), *RANDOM_AFTER_UPDATE, *distortion(w),
             ]
             for w in ("0.001", "0.01", "0.1")
         },
         **{
             f"wd0-nodecay-lr0.04-tv4-comp8-bgwarm-dist{w}": [
-                *LEGO_TV4, *components(8, 24), *RANDOM_AFTER_UPDATE, *distortion(w),
+                *LEGO_BGWARM, *distortion(w),
             ]
             for w in ("0.001", "0.01", "0.1")
         },
@@ -540,7 +555,7 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # more at P-MID, gain from it there (it lost at P-CPU: 22.80 -> 22.13)?
         "wd0-nodecay-lr0.04-tv6-bgrand-l1off": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_BACKGROUND, *L1_OFF],
         **{
-            f"wd0-nodecay-lr0.04-tv4-comp8-g{final}": [*LEGO_TV4, *components(8, 24), *grid(final // 2, final)]
+            f"wd0-nodecay-lr0.04-tv4-comp8-g{final}": [*LEGO_COMP8, *grid(final // 2, final)]
             for final in (192, 256)
         },
     },
@@ -551,8 +566,8 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.04": ["--optimizer.lr-grids", "0.04"],
         "lr0.08": ["--optimizer.lr-grids", "0.08"],
         "lr0.08-tvconst": ["--optimizer.lr-grids", "0.08", *TV_CONST],
-        "lr0.08-occ0.1": ["--optimizer.lr-grids", "0.08", "--pipeline.model.occlusion-weight", "0.1"],
-        "lr0.08-occ0": ["--optimizer.lr-grids", "0.08", "--pipeline.model.occlusion-weight", "0"],
+        "lr0.08-occ0.1": ["--optimizer.lr-grids", "0.08", *occlusion("0.1")],
+        "lr0.08-occ0": ["--optimizer.lr-grids", "0.08", *occlusion("0")],
         "lr0.08-ramp0.5": ["--optimizer.lr-grids", "0.08", "--pipeline.model.fourier.ramp-fraction", "0.5"],
         "lr0.08-ramp0.25": ["--optimizer.lr-grids", "0.08", RAMP, "0.25"],
         "lr0.08-fnm": ["--optimizer.lr-grids", "0.08", *FNM],
@@ -630,13 +645,13 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-tvconst-tv4-fnm-ramp0.1-alphamask0.25": [*FERN_TV4, *FNM, RAMP, "0.1", *OCCUPANCY_AT_STEP_200],
         # ... and the same later update on each method's P-CPU choice: what does it cost where the update at step 80
         # did not prune a dim field? (The budget rule's since session 28.)
-        "lr0.08-tvconst-tv4-alphamask0.25": [*FERN_TV4, *OCCUPANCY_AT_STEP_200],
+        "lr0.08-tvconst-tv4-alphamask0.25": [*fern_short(4.0)],
         "lr0.08-tvconst-tv4-fnm-alphamask0.25": [*FERN_TV4, *FNM, *OCCUPANCY_AT_STEP_200],
         # Session 29: the filters' periodic wrap puts NDC's far wall (z = 1) onto the near plane (z = -1) while the
         # band is narrow; fourierf-vm shows a near blob tensorf-vm lacks (the hanging frond, as it turned out): mirror
         # boundaries instead, with and
         # without Floaters-No-More.
-        "lr0.08-tvconst-tv4-alphamask0.25-mirror": [*FERN_TV4, *OCCUPANCY_AT_STEP_200, *MIRROR],
+        "lr0.08-tvconst-tv4-alphamask0.25-mirror": [*fern_short(4.0), *MIRROR],
         "lr0.08-tvconst-tv4-fnm-alphamask0.25-mirror": [*FERN_TV4, *FNM, *OCCUPANCY_AT_STEP_200, *MIRROR],
         # Session 29: a band open by step 80 still cost ~1 dB beside FNM (fnm-ramp0.1 above; FNM on density growth
         # alone collapsed every run to ~16 dB, not kept): FNM from the step the band is open, as the paper applies
@@ -649,17 +664,17 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         },
         # Session 29: fourierf-vm's fern renders are softer than tensorf-vm's with Floaters-No-More: the curriculum on
         # the geometry alone (the appearance grids unfiltered from step 0), with and without FNM.
-        "lr0.08-tvconst-tv4-alphamask0.25-f0c1": [*FERN_TV4, *OCCUPANCY_AT_STEP_200, F0_COLOR, "1.0"],
+        "lr0.08-tvconst-tv4-alphamask0.25-f0c1": [*fern_short(4.0), F0_COLOR, "1.0"],
         "lr0.08-tvconst-tv4-fnm-alphamask0.25-f0c1": [*FERN_TV4, *FNM, *OCCUPANCY_AT_STEP_200, F0_COLOR, "1.0"],
         # Session 45: fourierf-vm's fern fits are soft in depth, where three views pin a surface down and the band
         # holds it back: the density curriculum on the image plane only (x and y; NDC depth z unfiltered), with and
         # without FNM. (A throwaway prototype that held z's band narrower than x's and y's lost: half the cutoff
         # 19.64, the cutoff squared 19.89, against 20.08 on seed 20211202.)
-        "lr0.08-tvconst-tv4-alphamask0.25-zfree": [*FERN_TV4, *OCCUPANCY_AT_STEP_200, *DENSITY_XY],
+        "lr0.08-tvconst-tv4-alphamask0.25-zfree": [*fern_short(4.0), *DENSITY_XY],
         "lr0.08-tvconst-tv4-fnm-alphamask0.25-zfree": [*FERN_TV4, *FNM, *OCCUPANCY_AT_STEP_200, *DENSITY_XY],
         # ... and on it the levers its new field may want otherwise: mirror boundaries (x and y only now wrap), and
         # the TV weight chosen without it (4) a step or two either way.
-        "lr0.08-tvconst-tv4-alphamask0.25-zfree-mirror": [*FERN_TV4, *OCCUPANCY_AT_STEP_200, *DENSITY_XY, *MIRROR],
+        "lr0.08-tvconst-tv4-alphamask0.25-zfree-mirror": [*fern_short(4.0), *DENSITY_XY, *MIRROR],
         **{
             f"lr0.08-tvconst-tv{tv}-alphamask0.25-zfree": fern_image_plane(tv)
             for tv in (2, 6, 8)
@@ -668,7 +683,7 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # TV 6 as well, so neither method's TV search stops a step short of the other's.
         "lr0.08-tvconst-tv6-fnm-alphamask0.25": [*fern_tv(6), *FNM, *OCCUPANCY_AT_STEP_200],
         # ... and plain tensorf-vm, the rule's other method, at the rule's TV 4 and at TV 6 (its share of a TV rule).
-        "lr0.08-tvconst-tv6-alphamask0.25": [*fern_tv(6), *OCCUPANCY_AT_STEP_200],
+        "lr0.08-tvconst-tv6-alphamask0.25": [*fern_short(6)],
         # Session 46: on the image-plane curriculum at TV 6, the band's start and speed searched again (the preset's
         # f0 0.01 and whole-run ramp were chosen with every axis filtered), the grid lr and depth smoothness, and the
         # density band open from the start (appearance curriculum only). (Throwaway prototypes, not kept, filtered the
@@ -683,7 +698,7 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "lr0.08-tvconst-tv6-alphamask0.25-zfree-ramp0.75": [
             *fern_image_plane(6), RAMP, "0.75",
         ],
-        "lr0.08-tvconst-tv6-alphamask0.25-f0d1": [*fern_tv(6), *OCCUPANCY_AT_STEP_200, F0_DENSITY, "1.0"],
+        "lr0.08-tvconst-tv6-alphamask0.25-f0d1": [*fern_short(6), F0_DENSITY, "1.0"],
         # ... and Floaters-No-More, tensorf-vm's lever, which with every axis filtered did nothing for fourierf-vm and
         # with z unfiltered at TV 4 fell to 17.78: from the first step, and from step 400 on.
         "lr0.08-tvconst-tv6-fnm-alphamask0.25-zfree": [*fern_image_plane(6), *FNM],
@@ -704,7 +719,7 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
             for w in ("0.001", "0.01", "0.1")
         },
         **{
-            f"lr0.08-tvconst-tv6-alphamask0.25-dist{w}": [*fern_tv(6), *OCCUPANCY_AT_STEP_200, *distortion(w)]
+            f"lr0.08-tvconst-tv6-alphamask0.25-dist{w}": [*fern_short(6), *distortion(w)]
             for w in ("0.001", "0.01", "0.1")
         },
         **{
@@ -719,7 +734,7 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # 20.22, 20.59, 20.48 against 20.51; 0.03 on seed 1 19.54 against 19.86, so 0.01 stays.
         **{
             f"lr0.08-tvconst-tv6-alphamask0.25-zfree-occ{w}": [
-                *fern_image_plane(6), "--pipeline.model.occlusion-weight", w,
+                *fern_image_plane(6), *occlusion(w),
             ]
             for w in ("0", "0.03", "0.1")
         },

@@ -287,9 +287,9 @@ class FourieRFModel(nn.Module):
             if not self.training:
                 rgb = rgb.clamp(0.0, 1.0)
             depth = expected_depth(weights, samples.t, torch.full_like(acc, self.far))
-            out = {"rgb": rgb, "accumulation": acc, "depth": depth, "background": background}
-            if self.training and self.config.distortion_weight > 0:
-                out["distortion"] = losses.distortion(weights, (samples.t - self.near) / (self.far - self.near))
+        out = {"rgb": rgb, "accumulation": acc, "depth": depth, "background": background}
+        if self.training and self.config.distortion_weight > 0:
+            out |= {"weights": weights, "t": samples.t}  # for loss_dict's distortion term: unseen patches skip it
         if self.training and self.effects.occlusion_regularization:
             out["occlusion"] = occlusion_penalty(sigma, self.config.occlusion_fraction, self.config.distance_scale)
         return out
@@ -352,8 +352,9 @@ class FourieRFModel(nn.Module):
             out["l1_density"] = l1 * losses.density_l1(g.density.planes, g.density.lines)
         if "occlusion" in outputs and c.occlusion_weight > 0:
             out["occlusion"] = c.occlusion_weight * outputs["occlusion"]
-        if "distortion" in outputs:
-            out["distortion"] = c.distortion_weight * outputs["distortion"]
+        if c.distortion_weight > 0 and "weights" in outputs:
+            s = (outputs["t"] - self.near) / (self.far - self.near)
+            out["distortion"] = c.distortion_weight * losses.distortion(outputs["weights"], s)
         return out
 
     @torch.no_grad()

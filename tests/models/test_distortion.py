@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 import torch
 
+from fourierf_plugin.model_components import losses
 from tests.helpers import TINY_SCENE
 from tests.models.test_scene_effects import forbid, pipeline_for
 from tests.scenes import write_llff_scene
@@ -50,3 +51,22 @@ def test_on_it_is_a_finite_term_of_the_loss_that_reaches_the_density_grids(
     density = [p.grad for name, p in model.named_parameters() if name.startswith("field.density_grid")]
     assert any(g is not None and bool(g.abs().sum() > 0) for g in density)
     assert all(g is None or bool(torch.isfinite(g).all()) for g in density)
+
+
+def test_it_is_taken_once_a_step_on_the_training_rays_only(llff_scene: Path, tmp_path: Path, monkeypatch) -> None:
+    """With depth smoothness on too, the unseen-view patches are rendered in training mode as well; the distortion
+    term is still computed once, on the training batch (the patches' rays are not scored for it)."""
+    smooth = ("--pipeline.model.depth-smoothness-weight", "0.1", "--pipeline.model.depth-smoothness-patch-size", "4")
+    pipeline = pipeline_for(llff_scene, tmp_path, *ON, *smooth)
+    calls: list[int] = []
+    original = losses.distortion
+
+    def counted(weights: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
+        calls.append(weights.shape[0])
+        return original(weights, s)
+
+    monkeypatch.setattr(losses, "distortion", counted)
+    _, metrics = pipeline.train_step(0)
+    assert "depth_smoothness" in metrics and "distortion" in metrics
+    manager = pipeline.datamanager
+    assert calls == [min(manager.config.rays_per_batch, int(manager.active.numel()))]  # the training batch's rays

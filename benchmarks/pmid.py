@@ -46,7 +46,11 @@ regenerated from it alone). ``--device cuda --jobs 4`` runs four trainings at on
 ``--threads``; sixteen at once time-slice it to a crawl); the PSNRs do not depend on the device beyond float rounding
 and random streams, the times do (the table names the device). GPU runs are not bit-reproducible (grid_sample's CUDA
 backward accumulates with atomics): where a key is run again, its earlier row moves to ``repeats.jsonl`` beside the
-results with a ``repeat`` note, and the report sets both side by side.
+results with a ``repeat`` note, and the report sets both side by side. Nor is a CPU run on more than one thread (torch's
+parallel CPU kernels sum in a varying order; session 48: two 2-thread fern runs differed from step 40, and fern P-CPU
+tensorf-vm with Floaters-No-More, seed 20211202, read val 20.46 on two threads, 20.14 on one and 20.70 in its recorded
+row, which did not record its threads). On one thread, the default, it is: that run's training trace at commit 71362f1
+and at session 48's code agreed to the printed digit. Rows record their training's thread count (``train_threads``).
 """
 
 from __future__ import annotations
@@ -728,7 +732,7 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         },
         # ... and tensorf-vm's val choice under TensoRF's plain ReLU: its recorded rows (commit 71362f1) predate the
         # reviving ReLU, and a rerun under the current default read val 20.14 against the recorded 20.70. Plain reads
-        # 20.14 too, so the revival is not what moved it (README).
+        # 20.14 too, so the revival is not what moved it; the thread count is (the docstring; README).
         "lr0.08-tvconst-tv4-fnm-plain": [*FERN_TV4, *FNM, *PLAIN_RELU],
         # ... and FreeNeRF's occlusion weight (0.01, the preset's) off, tripled and tenfold on the image-plane rule:
         # 20.22, 20.59, 20.48 against 20.51; 0.03 on seed 1 19.54 against 19.86, so 0.01 stays.
@@ -1152,13 +1156,15 @@ def main() -> None:
     ap.add_argument("--seeds", nargs="+", type=int, choices=SEEDS[1:], default=None,
                     help="the seeds stage runs only these of the later seeds (default: all)")  # fmt: skip
     ap.add_argument("--jobs", type=int, default=1, help="trainings at once")
-    ap.add_argument("--threads", type=int, default=None, help="CPU threads per training and its evaluations")
+    ap.add_argument("--threads", type=int, default=1,
+                    help="CPU threads per training and its evaluations (1: a CPU run is bit-reproducible; more are "
+                         "faster alone, but sum floats in a varying order)")  # fmt: skip
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")
     args = ap.parse_args()
     if args.protocol is None:
         args.protocol = ["pcpu3000"] if args.stage == "curve" else ["pcpu", "pmid", "pmid800"]
-    if args.threads is not None and args.threads < 1:
-        sys.exit(f"error: --threads {args.threads} must be at least 1; pass e.g. --threads 1, or omit it")
+    if args.threads < 1:
+        sys.exit(f"error: --threads {args.threads} must be at least 1; pass e.g. --threads 2, or omit it for 1")
     if args.seeds and args.stage != "seeds":
         sys.exit(f"error: --seeds picks the later seeds of the seeds stage; drop it for the {args.stage} stage")
     known = {name for scene in args.scene for name in SETTINGS[scene]}

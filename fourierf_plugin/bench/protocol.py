@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import re
 import shutil
 import sys
 from collections.abc import Callable, Sequence
@@ -64,16 +65,31 @@ def train_and_eval(
         "--timestamp", run.key, "--seed", str(run.seed), "--max-num-iterations", str(run.iters),
         *GRID_FLAGS, *extra, *thread_flags(threads), *parser_args,
     ]  # fmt: skip
-    train_s, train_rss, code = run_timed(train_cmd, work / f"{run.key}.train.log")
+    train_log = work / f"{run.key}.train.log"
+    train_s, train_rss, code = run_timed(train_cmd, train_log)
     if code != 0:
-        raise RuntimeError(f"training failed ({code}); see {work / f'{run.key}.train.log'}")
+        raise RuntimeError(f"training failed ({code}); see {train_log}")
     views = json.loads((run_dir / "views.json").read_text())
     row = {
         "key": run.key, "method": run.method, "iters": run.iters, "seed": run.seed, "views": run.views,
         "train_view_ids": views["train_view_ids"], "train_seconds": train_s, "train_peak_rss_gb": train_rss,
-        "run_dir": str(run_dir), "machine": cpu_and_cores(),
+        "run_dir": str(run_dir), "machine": cpu_and_cores(), "train_threads": threads_used(train_log),
     }  # fmt: skip
     return row | evaluate(run_dir, run.key, work, lpips, threads=threads)
+
+
+_THREADS_LINE = re.compile(r"\((\d+)\s+CPU\s+threads\)")
+
+
+def threads_used(train_log: Path) -> int | None:
+    """The CPU thread count the trainer reported in its log (None: not found). One thread is reproducible, more are
+    not: parallel kernels sum floats in a varying order, which training amplifies (fern P-CPU, tensorf-vm with
+    Floaters-No-More, seed 20211202: val 20.14 on one thread, 20.46 on two), so a rerun must know it."""
+    try:
+        found = _THREADS_LINE.search(train_log.read_text(errors="replace"))
+    except OSError:
+        return None
+    return int(found.group(1)) if found else None
 
 
 def thread_flags(threads: int | None) -> list[str]:

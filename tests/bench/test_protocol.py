@@ -19,6 +19,8 @@ def commands(monkeypatch: pytest.MonkeyPatch) -> list[list[str]]:
     def fake_run_timed(cmd: list[str], log: Path) -> tuple[float, float, int]:
         launched.append(cmd)
         if cmd[0].endswith("fourierf-train"):
+            threads = _threads(cmd) or "2"  # the trainer's log line; torch's default on a 2-core machine
+            log.write_text(f"device cpu ({threads} CPU threads), grid [16, 16, 16],\n")
             run_dir = Path(cmd[cmd.index("--output-dir") + 1]) / "lego" / cmd[1] / cmd[cmd.index("--timestamp") + 1]
             run_dir.mkdir(parents=True)
             (run_dir / "views.json").write_text(json.dumps({"train_view_ids": [0, 1]}))
@@ -46,9 +48,20 @@ def test_threads_reach_the_training_and_every_evaluation(commands: list[list[str
     assert [_threads(c) for c in commands] == ["1", "1", "1"]
     assert (row["psnr"], row["val_psnr"], row["val_view_ids"]) == (20.0, 20.0, [2, 3])
     assert row["machine"] == protocol.cpu_and_cores()  # rows span sessions: each says where it ran
+    assert row["train_threads"] == 1  # a rerun must use as many: the thread count sets the order of float sums
 
 
 def test_without_threads_no_flag_is_passed(commands: list[list[str]], tmp_path: Path) -> None:
     run = protocol.Run("tensorf-vm", 10, 1, "tiny")
-    protocol.train_and_eval(run, tmp_path / "data", ["blender-data"], tmp_path, tmp_path / "w.pth", "lego")
+    row = protocol.train_and_eval(run, tmp_path / "data", ["blender-data"], tmp_path, tmp_path / "w.pth", "lego")
     assert [_threads(c) for c in commands] == [None, None]
+    assert row["train_threads"] == 2  # what the trainer reported, not what was asked
+
+
+def test_threads_used_reads_the_trainers_line_or_none(tmp_path: Path) -> None:
+    log = tmp_path / "train.log"
+    assert protocol.threads_used(log) is None  # no log at all
+    log.write_text("loading data\nstep 10/10\n")
+    assert protocol.threads_used(log) is None
+    log.write_text("device cpu (16 CPU\nthreads), grid [64, 64, 64]\n")  # the console may wrap the line
+    assert protocol.threads_used(log) == 16

@@ -970,13 +970,12 @@ RULE_ALONG_THE_BUDGET = {
         ("pcpu", "lr0.08-tvconst-tv6-alphamask0.25-zfree"),
         ("pcpu3000", "lr0.08-tvconst-ramp0.2667-tv4-revive1"),
     ),
-    "tensorf-vm": (("pcpu", "lr0.08-tvconst-tv6-alphamask0.25"), ("pcpu3000", "lr0.08-tvconst-tv4")),
+    "tensorf-vm": (("pcpu", "lr0.08-tvconst-tv6-alphamask0.25"), ("pcpu3000", "lr0.08-tvconst-tv4-revive1")),
 }
 """fern, each method: the budget rule's settings at 800 and at 3000 iterations of P-CPU's sizes (grid lr 0.08; at 800
 constant TV 6 and the occupancy update at step 200, fourierf-vm's band opening over the whole run with the density
-filtered on the image plane; at 3000 constant TV 4, fourierf-vm's band open over the first 800 on every axis and a
-dark density field revived at its first dark batch; tensorf-vm's 3000-iteration row, run before that revival joined
-the rule, waits for a fresh field)."""
+filtered on the image plane; at 3000 constant TV 4, fourierf-vm's band open over the first 800 on every axis, and for
+both a dark density field revived at its first dark batch), seed 20211202."""
 
 
 RULE_AT_800 = {
@@ -991,7 +990,7 @@ def rule_along_the_budget(results: dict[str, dict]) -> list[str]:
     lines = []
     for method, ((p_short, short), (p_long, long)) in RULE_ALONG_THE_BUDGET.items():
         short_rows = [r for r in rows_by(results, "fern", p_short, method).get(short, []) if r["seed"] == SEEDS[0]]
-        long_rows = rows_by(results, "fern", p_long, method).get(long, [])
+        long_rows = [r for r in rows_by(results, "fern", p_long, method).get(long, []) if r["seed"] == SEEDS[0]]
         if short_rows and long_rows:
             a, b = short_rows[0], long_rows[0]
             lines.append(

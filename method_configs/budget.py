@@ -175,7 +175,10 @@ at once won on each of three seeds (val, wait -> at once: seed 20211202, CPU, 21
 21.18 / 20.99 -> 21.41 / 21.33, with TensoRF's ReLU 21.32 / 21.24 and an earlier H100 run at once 21.63 / 21.47), and
 at 3000 on P-CPU's 64³ -> 128³ (seed 20211202: 20.94 -> 21.19), and at 1500 there (19.92 -> 20.36, with the band
 open by step 800; with the band over the whole run waiting won, 20.74 against 20.40). The boundary is the one the band
-uses (``REAL_RAMP_ITERATIONS``): reviving at once pays where the band opens early."""
+uses (``REAL_RAMP_ITERATIONS``): reviving at once pays where the band opens early. tensorf-vm on the rule's
+3000-iteration setting at P-CPU's sizes reads 21.73 / 21.54 / 20.91 (3 seeds; seed 1 never went dark: the same run as
+waiting; seed 20211202's waiting row, 20.94, did not record its thread count, so the revival's share is not
+separated)."""
 
 
 REAL_OCCUPANCY_STEP = 200

@@ -168,6 +168,8 @@ def test_the_rule_line_sets_each_methods_800_iteration_run_beside_its_3000(pmid:
         base = {"scene": "fern", "method": method}
         rows += [
             _row(short, pmid.SEEDS[0], val=19.5, test=19.0) | base | {"protocol": p_short, "key": f"{method}/short"},
+            # a later seed recorded first: the line sets the first seed's runs side by side, never a later one's
+            _row(long, pmid.SEEDS[1], val=25.0, test=25.0) | base | {"protocol": p_long, "key": f"{method}/long1"},
             _row(long, pmid.SEEDS[0], val=21.0, test=20.5) | base | {"protocol": p_long, "key": f"{method}/long"},
         ]
     lines = pmid.rule_along_the_budget({r["key"]: r for r in rows})
@@ -177,6 +179,7 @@ def test_the_rule_line_sets_each_methods_800_iteration_run_beside_its_3000(pmid:
         for method, ((_, short), (_, long)) in pmid.RULE_ALONG_THE_BUDGET.items()
     ]
     assert pmid.rule_along_the_budget({r["key"]: r for r in rows[:1]}) == [], "no 3000-iteration run: no line"
+    assert pmid.rule_along_the_budget({r["key"]: r for r in rows[:2]}) == [], "a later seed's alone: no line"
 
 
 def test_seeds_run_the_val_choice_on_the_later_seeds(pmid: ModuleType, tmp_path: Path) -> None:

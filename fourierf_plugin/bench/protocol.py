@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import os
 import platform
-import re
 import shutil
 import sys
 from collections.abc import Callable, Sequence
@@ -20,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from fourierf_plugin.bench.runner import run_timed
+from fourierf_plugin.utils.console import CPU_THREADS_NOTE
 
 BIN = Path(sys.executable).parent
 GRID_FLAGS = [
@@ -78,15 +78,12 @@ def train_and_eval(
     return row | evaluate(run_dir, run.key, work, lpips, threads=threads)
 
 
-_THREADS_LINE = re.compile(r"\((\d+)\s+CPU\s+threads\)")
-
-
 def threads_used(train_log: Path) -> int | None:
     """The CPU thread count the trainer reported in its log (None: not found). One thread is reproducible, more are
     not: parallel kernels sum floats in a varying order, which training amplifies (fern P-CPU, tensorf-vm with
     Floaters-No-More, seed 20211202: val 20.14 on one thread, 20.46 on two), so a rerun must know it."""
     try:
-        found = _THREADS_LINE.search(train_log.read_text(errors="replace"))
+        found = CPU_THREADS_NOTE.search(train_log.read_text(errors="replace"))
     except OSError:
         return None
     return int(found.group(1)) if found else None

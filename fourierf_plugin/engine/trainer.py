@@ -35,7 +35,14 @@ from fourierf_plugin.engine.option_checks import check_training_options
 from fourierf_plugin.engine.run_dir import make_run_dir
 from fourierf_plugin.exporter.marching_cubes import describe, export_field_mesh
 from fourierf_plugin.pipelines.base import Pipeline, PipelineConfig
-from fourierf_plugin.utils.console import TaskProgress, append_jsonl, format_duration, get_console, warn
+from fourierf_plugin.utils.console import (
+    TaskProgress,
+    append_jsonl,
+    cpu_threads_note,
+    format_duration,
+    get_console,
+    warn,
+)
 from fourierf_plugin.utils.errors import UserError, fail
 from fourierf_plugin.utils.phases import PhaseTimer, phase
 
@@ -184,7 +191,7 @@ class Trainer:
         self.console.print(f"training views ({len(scene.view_ids)}): {escape(', '.join(scene.image_names))}")
         self.console.print(f"scene effects: {model.effects.describe()}; {self.config.scene_preset} preset")
         self.console.print(
-            f"device {self.device} ({torch.get_num_threads()} CPU threads), grid {model.field.resolution}, "
+            f"device {self.device} ({cpu_threads_note(torch.get_num_threads())}), grid {model.field.resolution}, "
             f"{self.config.max_num_iterations} iterations, "
             f"occupancy updates after {model.occupancy_steps}, upsamples after {model.upsample_steps}"
         )

@@ -11,7 +11,7 @@ import torch
 
 from fourierf_plugin.engine.loading import LoadedRun, load_run, run_dir_of
 from fourierf_plugin.method_configs import config_registry
-from fourierf_plugin.utils.console import get_console
+from fourierf_plugin.utils.console import cpu_threads_note, get_console
 from fourierf_plugin.utils.errors import fail
 
 
@@ -35,7 +35,7 @@ class RunOptions:
             if self.threads < 1:
                 fail(f"--threads {self.threads} must be at least 1", "pass e.g. --threads 2, or omit it")
             torch.set_num_threads(self.threads)
-        get_console().print(f"{torch.get_num_threads()} CPU threads")
+        get_console().print(cpu_threads_note(torch.get_num_threads()))
         if self.checkpoint is not None and Path(self.checkpoint).exists() and not self.force_checkpoint:
             own = run_dir_of(Path(self.load_config)) / "checkpoints"
             if Path(self.checkpoint).resolve().parent != own.resolve():

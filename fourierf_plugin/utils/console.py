@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import sys
 import time
 from pathlib import Path
@@ -34,6 +35,16 @@ _ERR_CONSOLE: Console | None = None
 
 # Metrics with a natural precision; anything else gets 4 significant digits.
 _METRIC_FORMATS = {"psnr": ".2f", "f": ".3f", "ssim": ".4f", "lpips": ".4f", "lr": ".2e"}
+
+
+CPU_THREADS_NOTE = re.compile(r"(\d+)\s+CPU\s+threads")
+"""Reads the count back from ``cpu_threads_note`` in a log (the console may wrap it): benchmark rows record it."""
+
+
+def cpu_threads_note(threads: int) -> str:
+    """How many CPU threads torch computes on, as the logs say it: on a CPU only one thread sums floats in a fixed
+    order, so a run's numbers are reproducible only at the count it had."""
+    return f"{threads} CPU threads"
 
 
 def get_console() -> Console:

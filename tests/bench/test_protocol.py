@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from fourierf_plugin.bench import protocol
+from fourierf_plugin.utils.console import cpu_threads_note
 
 
 @pytest.fixture
@@ -20,7 +21,7 @@ def commands(monkeypatch: pytest.MonkeyPatch) -> list[list[str]]:
         launched.append(cmd)
         if cmd[0].endswith("fourierf-train"):
             threads = _threads(cmd) or "2"  # the trainer's log line; torch's default on a 2-core machine
-            log.write_text(f"device cpu ({threads} CPU threads), grid [16, 16, 16],\n")
+            log.write_text(f"device cpu ({cpu_threads_note(int(threads))}), grid [16, 16, 16],\n")
             run_dir = Path(cmd[cmd.index("--output-dir") + 1]) / "lego" / cmd[1] / cmd[cmd.index("--timestamp") + 1]
             run_dir.mkdir(parents=True)
             (run_dir / "views.json").write_text(json.dumps({"train_view_ids": [0, 1]}))
@@ -63,5 +64,5 @@ def test_threads_used_reads_the_trainers_line_or_none(tmp_path: Path) -> None:
     assert protocol.threads_used(log) is None  # no log at all
     log.write_text("loading data\nstep 10/10\n")
     assert protocol.threads_used(log) is None
-    log.write_text("device cpu (16 CPU\nthreads), grid [64, 64, 64]\n")  # the console may wrap the line
+    log.write_text(f"device cpu ({cpu_threads_note(16)}), grid [64, 64, 64]\n".replace(" ", "\n", 3))  # wrapped
     assert protocol.threads_used(log) == 16

@@ -74,6 +74,7 @@ def train_and_eval(
         "key": run.key, "method": run.method, "iters": run.iters, "seed": run.seed, "views": run.views,
         "train_view_ids": views["train_view_ids"], "train_seconds": train_s, "train_peak_rss_gb": train_rss,
         "run_dir": str(run_dir), "machine": cpu_and_cores(), "train_threads": threads_used(train_log),
+        "revived_batches": revived_batches(run_dir / "metrics.jsonl"),
     }  # fmt: skip
     return row | evaluate(run_dir, run.key, work, lpips, threads=threads)
 
@@ -87,6 +88,18 @@ def threads_used(train_log: Path) -> int | None:
     except OSError:
         return None
     return int(found.group(1)) if found else None
+
+
+def revived_batches(metrics: Path) -> int | None:
+    """Batches on which the run revived a dead density field, from its last logged step (None: its field cannot
+    revive, or the log predates the count). Where it is 0 the run is TensoRF's ReLU to the bit, so two settings that
+    differ only in when they revive trained the same run."""
+    try:
+        records = [json.loads(line) for line in metrics.read_text().splitlines() if line.strip()]
+    except (OSError, json.JSONDecodeError):
+        return None
+    counts = [r["revived_batches"] for r in records if "revived_batches" in r]
+    return int(counts[-1]) if counts else None
 
 
 def thread_flags(threads: int | None) -> list[str]:

@@ -305,6 +305,8 @@ class Trainer:
         self.console.print(
             f"trained {done - self.start_step} iterations in {format_duration(elapsed)}; run in {self.run_dir}"
         )
+        if shown.get("revived_batches"):
+            self.console.print(f"a dead density field was revived on {shown['revived_batches']:.0f} training batches")
         self.console.print(f"evaluate with: fourierf-eval --load-config {self.run_dir / 'config.json'}")
         return self.run_dir
 

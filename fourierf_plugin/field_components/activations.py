@@ -22,26 +22,31 @@ from torch import Tensor, nn
 
 class _RevivingReLU(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, x: Tensor, dark_batches: Tensor, lit: Tensor, patience: int) -> Tensor:  # type: ignore[override]
+    def forward(  # type: ignore[override]
+        ctx, x: Tensor, dark_batches: Tensor, lit: Tensor, revived: Tensor, patience: int
+    ) -> Tensor:
         y = torch.relu(x)
         dark = y.amax() <= 0  # decided on the device: no host wait (the GPU paths count them)
         dark_batches.copy_(torch.where(dark, dark_batches + 1, 0))  # batches in a row without a positive density
         revive = dark & (lit | (dark_batches >= patience))
         lit.logical_or_(~dark)
+        revived.add_(revive.long())
         ctx.save_for_backward(y, revive)
         return y
 
     @staticmethod
-    def backward(ctx, grad: Tensor) -> tuple[Tensor, None, None, None]:  # type: ignore[override]
+    def backward(ctx, grad: Tensor) -> tuple[Tensor, None, None, None, None]:  # type: ignore[override]
         y, revive = ctx.saved_tensors
         relu_grad = torch.ops.aten.threshold_backward(grad, y, 0.0)  # what torch.relu's own backward computes
-        return torch.where(revive, grad, relu_grad), None, None, None
+        return torch.where(revive, grad, relu_grad), None, None, None, None
 
 
 class RevivingReLU(nn.Module):
     """ReLU whose gradient passes everywhere on a training batch with no positive density once the field is dead:
     ``lit`` (an earlier batch had a positive density) or ``dark_batches`` in a row reached ``patience`` (1: every dark
-    batch). Both are buffers, kept in checkpoints. Plain ReLU wherever no gradient is taken."""
+    batch). Both are buffers, kept in checkpoints, as is ``revived``, the count of batches it revived: whether revival
+    acted at all in a run is otherwise invisible (a run it never acted on is TensoRF's ReLU to the bit). Plain ReLU
+    wherever no gradient is taken."""
 
     def __init__(self, patience: int) -> None:
         super().__init__()
@@ -50,16 +55,18 @@ class RevivingReLU(nn.Module):
         self.patience = patience
         self.register_buffer("dark_batches", torch.zeros((), dtype=torch.long))
         self.register_buffer("lit", torch.zeros((), dtype=torch.bool))
+        self.register_buffer("revived", torch.zeros((), dtype=torch.long))
 
     def forward(self, x: Tensor) -> Tensor:
         if not torch.is_grad_enabled() or not x.requires_grad or x.numel() == 0:
             return torch.relu(x)  # renders and the occupancy grid; amax of an empty batch would raise
-        return _RevivingReLU.apply(x, self.dark_batches, self.lit, self.patience)
+        return _RevivingReLU.apply(x, self.dark_batches, self.lit, self.revived, self.patience)
 
     def _load_from_state_dict(self, state_dict, prefix, *args) -> None:  # type: ignore[override]
         # checkpoints written before these existed: no dark batch counted, and a run that was saved had been lit
         state_dict.setdefault(prefix + "dark_batches", torch.zeros((), dtype=torch.long))
         state_dict.setdefault(prefix + "lit", torch.ones((), dtype=torch.bool))
+        state_dict.setdefault(prefix + "revived", torch.zeros((), dtype=torch.long))  # not counted then
         super()._load_from_state_dict(state_dict, prefix, *args)
 
     def extra_repr(self) -> str:

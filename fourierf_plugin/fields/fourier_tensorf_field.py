@@ -127,6 +127,10 @@ class FourierTensoRFField(PreparedField):
     def resolution(self) -> list[int]:
         return self.density_grid.resolution
 
+    @property
+    def revived_batches(self) -> Tensor | None:
+        return self.density_relu.revived if self.density_relu is not None else None
+
     # -- queries ----------------------------------------------------------------------------------------------
     def density(self, xyz: Tensor) -> Tensor:
         """Volume density σ ≥ 0 at world points [N, 3] -> [N]: the activated sum of the density components."""

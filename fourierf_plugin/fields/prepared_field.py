@@ -74,6 +74,11 @@ class PreparedField(nn.Module):
     def param_groups(self) -> dict[str, list[nn.Parameter]]:
         raise NotImplementedError
 
+    @property
+    def revived_batches(self) -> Tensor | None:
+        """Training batches on which a dead density field was revived so far (None: its activation never revives)."""
+        return None
+
     # -- the low-pass -----------------------------------------------------------------------------------------------
     def low_pass_planes(self, planes: Tensor, f: float) -> Tensor:
         """[..., H, W] planes at cutoff ``f``, with the field's plane leakage and boundary (periodic or mirror)."""

@@ -99,6 +99,9 @@ class Pipeline:
         metrics = {k: v.detach() for k, v in loss_terms.items()}
         metrics["loss"] = loss.detach()
         metrics["psnr"] = -10.0 * torch.log10(metrics["mse"].clamp(min=1e-10))
+        revived = self.model.field.revived_batches
+        if revived is not None:  # a count so far, logged so that a run says whether revival acted at all
+            metrics["revived_batches"] = revived.clone()
         return loss, metrics
 
     @staticmethod

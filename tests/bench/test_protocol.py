@@ -66,3 +66,15 @@ def test_threads_used_reads_the_trainers_line_or_none(tmp_path: Path) -> None:
     assert protocol.threads_used(log) is None
     log.write_text(f"device cpu ({cpu_threads_note(16)}), grid [64, 64, 64]\n".replace(" ", "\n", 3))  # wrapped
     assert protocol.threads_used(log) == 16
+
+
+def test_revived_batches_reads_the_last_logged_count_or_none(tmp_path: Path) -> None:
+    metrics = tmp_path / "metrics.jsonl"
+    assert protocol.revived_batches(metrics) is None  # no log
+    lines = [{"step": 40, "loss": 0.1}, {"step": 80, "revived_batches": 3.0}, {"step": 120, "revived_batches": 5.0}]
+    metrics.write_text("".join(json.dumps(r) + "\n" for r in [*lines, {"event": "done", "step": 120}]))
+    assert protocol.revived_batches(metrics) == 5  # the count so far at the last logged step
+    metrics.write_text(json.dumps(lines[0]) + "\n")
+    assert protocol.revived_batches(metrics) is None  # a field that cannot revive, or a log from before the count
+    metrics.write_text("{not json\n")
+    assert protocol.revived_batches(metrics) is None

@@ -85,6 +85,15 @@ def test_a_field_that_went_dark_after_lighting_revives_at_once() -> None:
     # dark from the start for two batches (it comes back by itself), then lit, then dead: revived at once
     assert _passes(relu, [DARK, DARK, LIT, DARK, DARK, LIT]) == [False, False, False, True, True, False]
     assert relu.lit.item() and relu.dark_batches.item() == 0
+    assert relu.revived.item() == 2  # the count says revival acted, and on how many batches
+
+
+def test_a_field_that_never_went_dark_counts_no_revival() -> None:
+    relu = RevivingReLU(patience=1)
+    assert _passes(relu, [LIT, LIT]) == [False, False]
+    with torch.no_grad():
+        relu(DARK)  # a render: nothing revived
+    assert relu.revived.item() == 0
 
 
 def test_patience_one_revives_every_dark_batch() -> None:
@@ -94,7 +103,7 @@ def test_patience_one_revives_every_dark_batch() -> None:
 def test_checkpoints_from_before_the_buffers_load_as_lit() -> None:
     relu = RevivingReLU(patience=3)
     relu.load_state_dict({})
-    assert relu.lit.item() and relu.dark_batches.item() == 0
+    assert relu.lit.item() and relu.dark_batches.item() == 0 and relu.revived.item() == 0
     assert _passes(relu, [DARK]) == [True]
 
 

@@ -71,6 +71,7 @@ from fourierf_plugin.bench.protocol import (
     evaluate,
     fmt,
     load_results,
+    save_results,
     section_head,
     train_and_eval,
     update_benchmarks_md,
@@ -798,7 +799,7 @@ def curve_points(run_dir: Path, run: Run, work: Path, lpips: Path, threads: int 
 def run_all(plan: Sequence[tuple[str, Run]], args: argparse.Namespace) -> None:
     """Run what is not yet recorded, ``--jobs`` at a time; each finished row is appended at once."""
     path = args.results
-    done = load_results(path)
+    done = {} if args.again else load_results(path)
     todo = [(scene, run) for scene, run in plan if f"{scene}/{run.key}" not in done]
     todo.sort(key=lambda item: (-item[1].iters, item[0] != "fern"))  # longest first: the pool ends on short runs
     lock = threading.Lock()
@@ -813,13 +814,26 @@ def run_all(plan: Sequence[tuple[str, Run]], args: argparse.Namespace) -> None:
             print(f"FAILED {scene}/{run.key}: {err}\n{tail}", flush=True)
             return
         row["key"] = f"{scene}/{run.key}"
-        with lock, path.open("a") as fh:
-            fh.write(json.dumps(row) + "\n")
+        with lock:
+            record(path, row, args.again)
         print(f"{row['key']}: val {row['val_psnr']:.2f}  train {row['train_seconds']:.0f}s", flush=True)
 
     print(f"{len(todo)} runs to do ({len(plan) - len(todo)} recorded)", flush=True)
     with ThreadPoolExecutor(max(1, args.jobs)) as pool:
         list(pool.map(one, todo))
+
+
+def record(path: Path, row: dict, again: str | None = None) -> None:
+    """Append a finished row. Run ``--again``, a recorded key's earlier row first moves to ``repeats.jsonl`` with the
+    note (the results keep one row a key), so nothing recorded is lost and the report can set the two side by side."""
+    earlier = load_results(path).get(row["key"]) if again else None
+    if earlier is not None:
+        with path.with_name(REPEATS).open("a") as fh:
+            fh.write(json.dumps(earlier | {"repeat": again}) + "\n")
+        kept = {k: r for k, r in load_results(path).items() if k != row["key"]}
+        save_results(path, kept)
+    with path.open("a") as fh:
+        fh.write(json.dumps(row) + "\n")
 
 
 def rows_by(results: dict[str, dict], scene: str, protocol: str, method: str) -> dict[str, list[dict]]:
@@ -1006,6 +1020,13 @@ REPEATS = "repeats.jsonl"
 with a ``repeat`` note that says what differed then: the spread between two runs of one setting and seed on a GPU."""
 
 
+def read_repeats(path: Path) -> list[dict]:
+    """Every row of ``repeats.jsonl``: unlike the results, a key may hold several (one a rerun)."""
+    if not path.exists():
+        return []
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
 def later_seeds_table(results: dict[str, dict], repeats: Sequence[dict]) -> list[str]:
     """Every setting run on each later seed on a GPU, with its earlier repeats: the ReLU rules and the neighbours of a
     choice compared where they ran side by side, read against the spread between repeats (GPU training is not
@@ -1045,6 +1066,40 @@ def later_seeds_table(results: dict[str, dict], repeats: Sequence[dict]) -> list
     ]
 
 
+def threads_cell(rows: Iterable[dict]) -> str:
+    """The CPU threads the rows trained on, as one cell: ``1`` where every CPU row says one (bit-reproducible), ``?``
+    for rows from before rows recorded it (session 48), ``—`` where none ran on a CPU."""
+    cpu = [r for r in rows if r.get("device") == "cpu"]
+    if not cpu:
+        return "—"
+    return " / ".join(sorted({str(r.get("train_threads") or "?") for r in cpu}))
+
+
+def cpu_reruns_table(results: dict[str, dict], repeats: Sequence[dict]) -> list[str]:
+    """Every CPU run of a key that ran twice, beside the row the report reads: how far one setting and seed moved
+    between two CPU runs (on more than one thread, or across a change of code) is the spread a difference must clear."""
+    lines = []
+    for other in sorted((r for r in repeats if r.get("device") == "cpu" and r["key"] in results),
+                        key=lambda r: r["key"]):  # fmt: skip
+        kept = results[other["key"]]
+        cells = [f"{r['val_psnr']:.2f} / {r['psnr']:.2f} ({threads_cell([r])})" for r in (kept, other)]
+        lines.append(
+            f"| {kept['scene']} | {PROTOCOLS[kept['protocol']].name} | {kept['method']} | `{kept['setting']}` | "
+            f"{kept['seed']} | {cells[0]} | {cells[1]} | {other['repeat']} |"
+        )
+    if not lines:
+        return []
+    return [
+        "CPU runs of one setting and seed run twice: the row the tables above read and the other run (`repeats.jsonl`"
+        "), val / test PSNR (CPU threads; ? = not recorded). Only a one-thread CPU run is bit-reproducible.",
+        "",
+        "| scene | protocol | method | setting | seed | read above | other run | what the other run was |",
+        "|---|---|---|---|---|---|---|---|",
+        *lines,
+        "",
+    ]
+
+
 def comparable_seconds(rows: dict[str, list[dict]]) -> str:
     """Each method's mean training seconds over its runs on one device both methods ran on (the one holding most of
     their runs), as the summary's cell: a mean over a CPU run and two GPU runs set beside three CPU runs would read as
@@ -1079,8 +1134,8 @@ def report(args: argparse.Namespace) -> list[str]:
     )
     summary = [
         "| scene | protocol | device | fourierf-vm: setting, test PSNR (seeds) | tensorf-vm: setting, test PSNR (seeds)"
-        " | gap | train s (f / t) |",
-        "|---|---|---|---|---|---|---|",
+        " | gap | CPU threads | train s (f / t) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     sweeps: list[str] = []
     for scene in ("lego", "fern"):
@@ -1097,7 +1152,7 @@ def report(args: argparse.Namespace) -> list[str]:
             gap = np.mean(test["fourierf-vm"]) - np.mean(test["tensorf-vm"])
             summary.append(
                 f"| {scene} | {name} | {device} | {cells[0]} | {cells[1]} | **{gap:+.2f}** | "
-                f"{comparable_seconds(rows)} |"
+                f"{threads_cell(r for m in METHODS for r in rows[m])} | {comparable_seconds(rows)} |"
             )
             for s in SETTINGS[scene]:
                 vals = [val_cell(tables[m][s]) if s in tables[m] else "—" for m in METHODS]
@@ -1114,7 +1169,9 @@ def report(args: argparse.Namespace) -> list[str]:
     body += equal_time_lines(results)
     body += rule_along_the_budget(results)
     body += ["", *curve_table(results)]
-    body += later_seeds_table(results, list(load_results(args.results.with_name(REPEATS)).values()))
+    repeats = read_repeats(args.results.with_name(REPEATS))
+    body += later_seeds_table(results, repeats)
+    body += cpu_reruns_table(results, repeats)
     body += [
         f"Validation PSNR of every setting tried, seed {SEEDS[0]}, and the mean over all {len(SEEDS)} seeds where "
         "they were run, or over the seeds named where only some were (the choice above is the best all-seed mean of "
@@ -1158,12 +1215,18 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=1,
                     help="CPU threads per training and its evaluations (1: a CPU run is bit-reproducible; more are "
                          "faster alone, but sum floats in a varying order)")  # fmt: skip
+    ap.add_argument("--again", metavar="NOTE", default=None,
+                    help="run the plan's recorded runs again too; each earlier row moves to repeats.jsonl with NOTE "
+                         "(what differed then, e.g. 'threads not recorded')")  # fmt: skip
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")
     args = ap.parse_args()
     if args.protocol is None:
         args.protocol = ["pcpu3000"] if args.stage == "curve" else ["pcpu", "pmid", "pmid800"]
     if args.threads < 1:
         sys.exit(f"error: --threads {args.threads} must be at least 1; pass e.g. --threads 2, or omit it for 1")
+    if args.again is not None and (args.stage == "report" or not args.again.strip()):
+        sys.exit("error: --again NOTE reruns the runs of a sweep, seeds or curve stage and needs a note saying what "
+                 "differed then, e.g. --again 'threads not recorded'")  # fmt: skip
     if args.seeds and args.stage != "seeds":
         sys.exit(f"error: --seeds picks the later seeds of the seeds stage; drop it for the {args.stage} stage")
     known = {name for scene in args.scene for name in SETTINGS[scene]}

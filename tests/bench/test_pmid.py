@@ -258,3 +258,49 @@ def test_threads_below_one_is_one_clear_error(tmp_path: Path) -> None:
                           capture_output=True, text=True)  # fmt: skip
     assert done.returncode != 0 and "--threads 0 must be at least 1" in done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_a_run_again_moves_the_earlier_row_to_the_repeats_with_its_note(pmid: ModuleType, tmp_path: Path) -> None:
+    path = tmp_path / "results.jsonl"
+    first, other = _row("tv4", 1, val=21.0, test=20.0), _row("tv6", 1, val=20.0, test=19.0)
+    for row in (first, other):
+        pmid.record(path, row)
+    rerun = first | {"val_psnr": 21.5, "train_threads": 1}
+    pmid.record(path, rerun, again="threads not recorded")
+    results = pmid.load_results(path)
+    assert results == {first["key"]: rerun, other["key"]: other}  # one row a key, the latest
+    assert len(path.read_text().splitlines()) == 2
+    repeats = pmid.read_repeats(path.with_name(pmid.REPEATS))
+    assert repeats == [first | {"repeat": "threads not recorded"}]  # nothing recorded is lost
+    pmid.record(path, rerun | {"val_psnr": 21.6}, again="a second rerun")
+    assert [r["val_psnr"] for r in pmid.read_repeats(path.with_name(pmid.REPEATS))] == [21.0, 21.5]
+    pmid.record(path, _row("tv8", 1, val=19.0, test=18.0), again="nothing earlier")  # a new key: nothing moves
+    assert len(pmid.read_repeats(path.with_name(pmid.REPEATS))) == 2
+
+
+def test_the_threads_cell_says_which_cpu_rows_are_reproducible(pmid: ModuleType) -> None:
+    cpu = {"device": "cpu"}
+    assert pmid.threads_cell([cpu | {"train_threads": 1}, cpu | {"train_threads": 1}]) == "1"
+    assert pmid.threads_cell([cpu | {"train_threads": 1}, cpu]) == "1 / ?"  # a row from before rows recorded it
+    assert pmid.threads_cell([{"device": "cuda"}]) == "—"
+
+
+def test_the_cpu_reruns_table_sets_a_cpu_repeat_beside_the_row_read(pmid: ModuleType) -> None:
+    kept = _row("tv4", 1, val=21.5, test=20.5) | {"device": "cpu", "train_threads": 1}
+    earlier = _row("tv4", 1, val=21.0, test=20.0) | {"device": "cpu", "repeat": "threads not recorded"}
+    gpu = _row("tv6", 1, val=20.0, test=19.0) | {"device": "cuda", "repeat": "a GPU repeat"}  # the later-seeds table's
+    stray = _row("tv8", 1, val=20.0, test=19.0) | {"device": "cpu", "repeat": "its key is gone"}
+    results = {r["key"]: r for r in (kept, gpu | {"repeat": ""})}
+    lines = [line for line in pmid.cpu_reruns_table(results, [earlier, gpu, stray]) if line.startswith("| lego")]
+    assert lines == [
+        "| lego | P-CPU | fourierf-vm | `tv4` | 1 | 21.50 / 20.50 (1) | 21.00 / 20.00 (?) | threads not recorded |"
+    ]
+    assert pmid.cpu_reruns_table(results, []) == []
+
+
+@pytest.mark.parametrize("extra", [["report", "--again", "x"], ["sweep", "--again", " "]])
+def test_again_without_a_run_or_a_note_is_one_clear_error(tmp_path: Path, extra: list[str]) -> None:
+    done = subprocess.run([sys.executable, str(SCRIPT), *extra, "--work", str(tmp_path)],
+                          capture_output=True, text=True)  # fmt: skip
+    assert done.returncode != 0 and "--again NOTE" in done.stderr
+    assert "Traceback" not in done.stderr

@@ -39,18 +39,21 @@ val-chosen setting's test score is reported. Stages:
     python benchmarks/pmid.py seeds  --protocol pcpu pmid --scene lego fern   # the val-chosen setting, more seeds
     python benchmarks/pmid.py seeds  --protocol pmid --scene lego --seeds 1   # one later seed at a time (long runs)
     python benchmarks/pmid.py curve  --scene fern     # P-CPU sizes at 3000 iterations, a checkpoint every 500 evaluated
+    python benchmarks/pmid.py sweep  --only S --again "threads not recorded"  # run recorded runs again (repeats.jsonl)
     python benchmarks/pmid.py report                                          # BENCHMARKS.md section
 
 Rows go to ``benchmarks/results/pmid/results.jsonl`` (committed; a recorded run is skipped, so the report is
 regenerated from it alone). ``--device cuda --jobs 4`` runs four trainings at once on one GPU (each with
 ``--threads``; sixteen at once time-slice it to a crawl); the PSNRs do not depend on the device beyond float rounding
 and random streams, the times do (the table names the device). GPU runs are not bit-reproducible (grid_sample's CUDA
-backward accumulates with atomics): where a key is run again, its earlier row moves to ``repeats.jsonl`` beside the
-results with a ``repeat`` note, and the report sets both side by side. Nor is a CPU run on more than one thread (torch's
-parallel CPU kernels sum in a varying order; session 48: two 2-thread fern runs differed from step 40, and fern P-CPU
-tensorf-vm with Floaters-No-More, seed 20211202, read val 20.46 on two threads, 20.14 on one and 20.70 in its recorded
-row, which did not record its threads). On one thread, the default, it is: that run's training trace at commit 71362f1
-and at session 48's code agreed to the printed digit. Rows record their training's thread count (``train_threads``).
+backward accumulates with atomics): where a key is run again (``--again NOTE``), its earlier row moves to
+``repeats.jsonl`` beside the results with NOTE as its ``repeat`` note, and the report sets both side by side. Nor is
+a CPU run on more than one thread (torch's parallel CPU kernels sum in a varying order; session 48: two 2-thread fern
+runs differed from step 40, and fern P-CPU tensorf-vm with Floaters-No-More, seed 20211202, read val 20.46 on two
+threads, 20.14 on one and 20.70 in its recorded row, which did not record its threads). On one thread, the default,
+it is: that run's training trace at commit 71362f1 and at session 48's code agreed to the printed digit, and session
+49's rerun read 20.14 again. Rows record their training's thread count (``train_threads``) and, where the density can
+revive, the batches it revived (``revived_batches``; 0: the run is TensoRF's ReLU to the bit).
 """
 
 from __future__ import annotations

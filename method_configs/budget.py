@@ -173,12 +173,12 @@ At 800 iterations waiting won (``benchmarks/dead_start.py``, 64³: +0.27 dB val 
 +0.22 reviving at once; fern P-CPU seed 20211202 20.24 against 19.82); at 3000 (P-MID, 96³ -> 192³, 2048 rays) reviving
 at once won on each of three seeds (val, wait -> at once: seed 20211202, CPU, 21.36 -> 21.66; seeds 1 and 2, H100,
 21.18 / 20.99 -> 21.41 / 21.33, with TensoRF's ReLU 21.32 / 21.24 and an earlier H100 run at once 21.63 / 21.47), and
-at 3000 on P-CPU's 64³ -> 128³ (seed 20211202: 20.94 -> 21.19), and at 1500 there (19.92 -> 20.36, with the band
-open by step 800; with the band over the whole run waiting won, 20.74 against 20.40). The boundary is the one the band
-uses (``REAL_RAMP_ITERATIONS``): reviving at once pays where the band opens early. tensorf-vm on the rule's
-3000-iteration setting at P-CPU's sizes reads 21.73 / 21.54 / 20.91 (3 seeds; seed 1 never went dark: the same run as
-waiting; seed 20211202's waiting row, 20.94, did not record its thread count, so the revival's share is not
-separated)."""
+at 1500 on P-CPU's 64³ -> 128³ (19.92 -> 20.36, with the band open by step 800; with the band over the whole run
+waiting won, 20.74 against 20.40). The boundary is the one the band uses (``REAL_RAMP_ITERATIONS``): reviving at once
+pays where the band opens early. The CPU pairs above did not record their thread count; the one pair rerun on one
+thread (session 49; P-CPU's grid at 3000, seed 20211202) reads 21.44 -> 21.33, the revival acting on one batch,
+where it had been recorded as 20.94 -> 21.19, so the rule rests on P-MID's grid, the one a CPU run of fern gets by
+default. In tensorf-vm's runs it never acts there (P-CPU's grid at 3000, 3 seeds: revived on 0 batches)."""
 
 
 REAL_OCCUPANCY_STEP = 200

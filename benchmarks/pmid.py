@@ -829,12 +829,12 @@ def run_all(plan: Sequence[tuple[str, Run]], args: argparse.Namespace) -> None:
 def record(path: Path, row: dict, again: str | None = None) -> None:
     """Append a finished row. Run ``--again``, a recorded key's earlier row first moves to ``repeats.jsonl`` with the
     note (the results keep one row a key), so nothing recorded is lost and the report can set the two side by side."""
-    earlier = load_results(path).get(row["key"]) if again else None
+    held = load_results(path) if again else {}
+    earlier = held.pop(row["key"], None)
     if earlier is not None:
         with path.with_name(REPEATS).open("a") as fh:
             fh.write(json.dumps(earlier | {"repeat": again}) + "\n")
-        kept = {k: r for k, r in load_results(path).items() if k != row["key"]}
-        save_results(path, kept)
+        save_results(path, held)
     with path.open("a") as fh:
         fh.write(json.dumps(row) + "\n")
 
@@ -1019,8 +1019,9 @@ def rule_along_the_budget(results: dict[str, dict]) -> list[str]:
 
 
 REPEATS = "repeats.jsonl"
-"""Beside the results: earlier rows of a key that was run again (the results keep one row a key, the latest), each
-with a ``repeat`` note that says what differed then: the spread between two runs of one setting and seed on a GPU."""
+"""Beside the results: other runs of a key that was run again (the results keep one row a key), each with a
+``repeat`` note that says what that run was: the spread between two runs of one setting and seed, on a GPU or on a
+CPU on more than one thread (or with an earlier tree's code)."""
 
 
 def read_repeats(path: Path) -> list[dict]:

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fourierf_plugin.bench.phases import log_records, read_metrics
 from fourierf_plugin.bench.runner import run_timed
 from fourierf_plugin.utils.console import CPU_THREADS_NOTE
 
@@ -94,11 +95,7 @@ def revived_batches(metrics: Path) -> int | None:
     """Batches on which the run revived a dead density field, from its last logged step (None: its field cannot
     revive, or the log predates the count). Where it is 0 the run is TensoRF's ReLU to the bit, so two settings that
     differ only in when they revive trained the same run."""
-    try:
-        records = [json.loads(line) for line in metrics.read_text().splitlines() if line.strip()]
-    except (OSError, json.JSONDecodeError):
-        return None
-    counts = [r["revived_batches"] for r in records if "revived_batches" in r]
+    counts = [r["revived_batches"] for r in log_records(read_metrics(metrics)) if "revived_batches" in r]
     return int(counts[-1]) if counts else None
 
 

@@ -304,3 +304,22 @@ def test_again_without_a_run_or_a_note_is_one_clear_error(tmp_path: Path, extra:
                           capture_output=True, text=True)  # fmt: skip
     assert done.returncode != 0 and "--again NOTE" in done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_run_all_skips_recorded_runs_unless_run_again(pmid: ModuleType, tmp_path: Path, monkeypatch) -> None:
+    run = pmid.Run("fourierf-vm", 800, 1, "pcpu-tv4")
+    path = tmp_path / "results.jsonl"
+    pmid.record(path, _row("tv4", 1, val=21.0, test=20.0))
+    ran = []
+
+    def execute(run, scene, args):  # a finished training and evaluation, without either
+        ran.append(run.key)
+        return _row("tv4", 1, val=21.5, test=20.5) | {"train_seconds": 1.0}
+
+    monkeypatch.setattr(pmid, "execute", execute)
+    args = argparse.Namespace(results=path, jobs=1, again=None, work=tmp_path)
+    pmid.run_all([("lego", run)], args)
+    assert ran == [] and pmid.load_results(path)[f"lego/{run.key}"]["val_psnr"] == 21.0  # recorded: skipped
+    pmid.run_all([("lego", run)], argparse.Namespace(**{**vars(args), "again": "threads not recorded"}))
+    assert ran == [run.key] and pmid.load_results(path)[f"lego/{run.key}"]["val_psnr"] == 21.5
+    assert [r["repeat"] for r in pmid.read_repeats(path.with_name(pmid.REPEATS))] == ["threads not recorded"]

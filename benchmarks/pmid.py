@@ -40,6 +40,7 @@ val-chosen setting's test score is reported. Stages:
     python benchmarks/pmid.py seeds  --protocol pmid --scene lego --seeds 1   # one later seed at a time (long runs)
     python benchmarks/pmid.py curve  --scene fern     # P-CPU sizes at 3000 iterations, a checkpoint every 500 evaluated
     python benchmarks/pmid.py sweep  --only S --again "threads not recorded"  # run recorded runs again (repeats.jsonl)
+    python benchmarks/pmid.py merge  --rows lane2/results.jsonl --again "threads not recorded"  # rows run elsewhere
     python benchmarks/pmid.py report                                          # BENCHMARKS.md section
 
 Rows go to ``benchmarks/results/pmid/results.jsonl`` (committed; a recorded run is skipped, so the report is
@@ -839,6 +840,54 @@ def record(path: Path, row: dict, again: str | None = None) -> None:
         fh.write(json.dumps(row) + "\n")
 
 
+ROW_FIELDS = ("key", "scene", "protocol", "method", "setting", "seed", "val_psnr", "psnr")
+"""What the report reads of a row: a row merged from elsewhere must carry each."""
+
+
+def read_rows(source: Path) -> list[dict]:
+    """The rows of a results file written elsewhere (another results path, the device machine), checked for what the
+    report reads; ValueError names the file, the line and the fix."""
+    if not source.is_file():
+        raise ValueError(f"{source}: no such results file; pass the --results path a sweep, seeds or curve stage wrote")
+    rows = []
+    for number, line in enumerate(source.read_text().splitlines(), start=1):
+        if not line.strip():
+            continue
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError as err:
+            raise ValueError(f"{source}:{number}: not a JSON row ({err.msg}); one finished run a line") from None
+        missing = [f for f in ROW_FIELDS if not isinstance(row, dict) or f not in row]
+        if missing:
+            raise ValueError(f"{source}:{number}: a row without {', '.join(missing)}; merge only rows pmid.py recorded")
+        if row["protocol"] not in PROTOCOLS or row["method"] not in METHODS:
+            raise ValueError(f"{source}:{number}: protocol {row['protocol']!r} or method {row['method']!r} is not "
+                             f"one of pmid.py's ({', '.join(PROTOCOLS)}; {', '.join(METHODS)})")  # fmt: skip
+        rows.append(row)
+    return rows
+
+
+def merge(path: Path, sources: Sequence[Path], again: str | None) -> list[str]:
+    """Record the rows of ``sources`` in the results at ``path``, as ``run_all`` records a finished run: a recorded key
+    is skipped, or, ``again``, its earlier row moves to the repeats with that note. Every source is read and checked
+    before anything is written. Why: runs trained side by side as separate processes (or on the device machine) write
+    their own results files, and one process must move rows between the files."""
+    if any(source.resolve() == path.resolve() for source in sources):
+        raise ValueError(f"{path}: the results cannot be merged into themselves; pass the other run's --results file")
+    rows = [row for source in sources for row in read_rows(source)]
+    held = load_results(path)
+    lines = []
+    for row in rows:
+        if row["key"] in held and again is None:
+            lines.append(f"{row['key']}: recorded, skipped (--again NOTE keeps this row, the earlier to the repeats)")
+            continue
+        record(path, row, again)
+        held[row["key"]] = row
+        threads = row.get("train_threads", "?")
+        lines.append(f"{row['key']}: val {row['val_psnr']:.2f}  test {row['psnr']:.2f}  (threads {threads})")
+    return lines
+
+
 def rows_by(results: dict[str, dict], scene: str, protocol: str, method: str) -> dict[str, list[dict]]:
     """Recorded rows of one (scene, protocol, method), grouped by setting."""
     out: dict[str, list[dict]] = {}
@@ -1200,7 +1249,7 @@ def report(args: argparse.Namespace) -> list[str]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("stage", choices=("sweep", "seeds", "curve", "report"))
+    ap.add_argument("stage", choices=("sweep", "seeds", "curve", "merge", "report"))
     ap.add_argument("--protocol", nargs="+", choices=tuple(PROTOCOLS), default=None,
                     help="default: pcpu pmid pmid800 (the curve stage: pcpu3000)")  # fmt: skip
     ap.add_argument("--scene", nargs="+", choices=tuple(SETTINGS), default=list(SETTINGS))
@@ -1222,6 +1271,8 @@ def main() -> None:
     ap.add_argument("--again", metavar="NOTE", default=None,
                     help="run the plan's recorded runs again too; each earlier row moves to repeats.jsonl with NOTE "
                          "(what differed then, e.g. 'threads not recorded')")  # fmt: skip
+    ap.add_argument("--rows", nargs="+", type=Path, default=None, metavar="FILE",
+                    help="merge: results files written elsewhere (another --results, the device)")  # fmt: skip
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")
     args = ap.parse_args()
     if args.protocol is None:
@@ -1229,8 +1280,11 @@ def main() -> None:
     if args.threads < 1:
         sys.exit(f"error: --threads {args.threads} must be at least 1; pass e.g. --threads 2, or omit it for 1")
     if args.again is not None and (args.stage == "report" or not args.again.strip()):
-        sys.exit("error: --again NOTE reruns the runs of a sweep, seeds or curve stage and needs a note saying what "
-                 "differed then, e.g. --again 'threads not recorded'")  # fmt: skip
+        sys.exit("error: --again NOTE reruns the runs of a sweep, seeds or curve stage (or merges runs of recorded "
+                 "keys) and needs a note saying what differed then, e.g. --again 'threads not recorded'")  # fmt: skip
+    if (args.rows is None) != (args.stage != "merge"):
+        sys.exit("error: --rows FILE ... goes with the merge stage, and the merge stage needs it: "
+                 "pmid.py merge --rows other/results.jsonl")  # fmt: skip
     if args.seeds and args.stage != "seeds":
         sys.exit(f"error: --seeds picks the later seeds of the seeds stage; drop it for the {args.stage} stage")
     known = {name for scene in args.scene for name in SETTINGS[scene]}
@@ -1242,6 +1296,12 @@ def main() -> None:
     args.results.parent.mkdir(parents=True, exist_ok=True)
     if args.stage == "report":
         print(update_benchmarks_md(args.markdown, BEGIN, END, report(args)))
+        return
+    if args.stage == "merge":
+        try:
+            print("\n".join(merge(args.results, args.rows, args.again)))
+        except ValueError as err:
+            sys.exit(f"error: {err}")
         return
     for scene in args.scene:
         if not (args.data / ("blender/lego/transforms_train.json" if scene == "lego" else "llff/fern")).exists():

@@ -4,6 +4,7 @@ and an unknown ``--only`` name or a misplaced ``--seeds`` is one clear error."""
 from __future__ import annotations
 
 import argparse
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -323,3 +324,62 @@ def test_run_all_skips_recorded_runs_unless_run_again(pmid: ModuleType, tmp_path
     pmid.run_all([("lego", run)], argparse.Namespace(**{**vars(args), "again": "threads not recorded"}))
     assert ran == [run.key] and pmid.load_results(path)[f"lego/{run.key}"]["val_psnr"] == 21.5
     assert [r["repeat"] for r in pmid.read_repeats(path.with_name(pmid.REPEATS))] == ["threads not recorded"]
+
+
+def test_merge_records_rows_run_elsewhere_as_a_run_would(pmid: ModuleType, tmp_path: Path) -> None:
+    path, lane = tmp_path / "results.jsonl", tmp_path / "lane" / "results.jsonl"
+    pmid.record(path, _row("tv4", 1, val=21.0, test=20.0))
+    lane.parent.mkdir()
+    rerun, new = _row("tv4", 1, val=21.5, test=20.5) | {"train_threads": 1}, _row("tv6", 2, val=20.0, test=19.0)
+    lane.write_text(f"{json.dumps(rerun)}\n\n{json.dumps(new)}\n")
+    lines = pmid.merge(path, [lane], again=None)
+    assert lines[0].endswith("recorded, skipped (--again NOTE keeps this row, the earlier to the repeats)")
+    assert pmid.load_results(path)[rerun["key"]]["val_psnr"] == 21.0 and new["key"] in pmid.load_results(path)
+    lines = pmid.merge(path, [lane], again="threads not recorded")
+    assert lines[0] == f"{rerun['key']}: val 21.50  test 20.50  (threads 1)"
+    assert pmid.load_results(path)[rerun["key"]] == rerun
+    repeats = pmid.read_repeats(path.with_name(pmid.REPEATS))
+    assert [(r["key"], r["val_psnr"], r["repeat"]) for r in repeats] == [
+        (rerun["key"], 21.0, "threads not recorded"),
+        (new["key"], 20.0, "threads not recorded"),  # merged twice: the first merge's row is kept, not lost
+    ]
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (None, "no such results file; pass the --results path"),
+        ('{"key": "lego/x"\n', ":1: not a JSON row"),
+        ('{"key": "lego/x", "scene": "lego"}\n', ":1: a row without protocol, method, setting, seed, val_psnr, psnr"),
+        (json.dumps({**_row("tv4", 1, 21.0, 20.0), "protocol": "p9"}) + "\n", ":1: protocol 'p9' or method"),
+    ],
+)
+def test_merge_refuses_a_bad_file_before_writing_anything(tmp_path: Path, text: str | None, message: str) -> None:
+    lane, results = tmp_path / "lane.jsonl", tmp_path / "results.jsonl"
+    good = tmp_path / "good.jsonl"
+    good.write_text(json.dumps(_row("tv6", 1, 20.0, 19.0)) + "\n")
+    if text is not None:
+        lane.write_text(text)
+    cmd = [sys.executable, str(SCRIPT), "merge", "--rows", str(good), str(lane), "--results", str(results)]
+    done = subprocess.run([*cmd, "--work", str(tmp_path / "work")], capture_output=True, text=True)
+    assert done.returncode != 0 and "Traceback" not in done.stderr
+    assert f"error: {lane}" in done.stderr and message in done.stderr
+    assert not results.exists()  # the good file's row waited for the bad one's check
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["merge"], "--rows FILE ... goes with the merge stage"),
+        (["sweep", "--rows", "x.jsonl"], "--rows FILE ... goes with the merge stage"),
+        (["merge", "--rows", "{results}"], "cannot be merged into themselves"),
+    ],
+)
+def test_merge_without_rows_or_into_itself_is_one_clear_error(tmp_path: Path, extra: list[str], message: str) -> None:
+    results = tmp_path / "results.jsonl"
+    results.write_text("")
+    extra = [e.format(results=results) for e in extra]
+    cmd = [sys.executable, str(SCRIPT), *extra, "--results", str(results), "--work", str(tmp_path)]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    assert done.returncode != 0 and message in done.stderr
+    assert "Traceback" not in done.stderr

@@ -139,11 +139,12 @@ REAL_SHORT_TV_WEIGHT = 6.0
 of ``REAL_TV_WEIGHT``. Fern val (P-CPU's 64³ -> 128³, 1024 rays, 800 iterations, 3 seeds, TV 4 -> 6, each method on the
 rest of its rule): fourierf-vm (density filtered on the image plane, ``REAL_DENSITY_AXES``) 20.28 -> 20.41 (+0.07,
 -0.37, +0.71 a seed; test 19.65 -> 19.83), tensorf-vm 19.16 -> 19.48 (+0.33, +0.34, +0.31; test 18.26 -> 18.72).
-fourierf-vm at TV 2 read 20.02 and at TV 8 19.96 (seed 20211202). tensorf-vm with Floaters-No-More, in no rule, read
-lower at TV 6 (20.69 -> 20.60, 3 seeds). Longer runs keep TV 4 (``REAL_TV_WEIGHT``): at 3000 iterations (P-MID,
-band open by step 800, without the revival) fourierf-vm's TV 6 read lower on seeds 1 and 2 (21.12 / 20.82 against
-21.18 / 20.99); at 1500 (P-CPU's sizes, band open by step 800, the revival at once; seeds 20211202 and 1) fourierf-vm
-lost on both (20.36 / 20.21 -> 20.26 / 20.07) and tensorf-vm tied (20.22 / 20.48 -> 20.38 / 20.37)."""
+fourierf-vm at TV 2 read 20.02 and at TV 8 19.96 (seed 20211202). tensorf-vm with Floaters-No-More, in no rule, is
+indifferent (one thread, session 50: 20.58 -> 20.60, 3 seeds; test 19.93 either way). Longer runs keep TV 4
+(``REAL_TV_WEIGHT``): at 3000 iterations (P-MID, band open by step 800, without the revival) fourierf-vm's TV 6 read
+lower on seeds 1 and 2 (21.12 / 20.82 against 21.18 / 20.99); at 1500 (P-CPU's sizes, band open by step 800, the revival
+at once; seeds 20211202 and 1) fourierf-vm lost on both (20.36 / 20.21 -> 20.26 / 20.07) and tensorf-vm tied (20.22 /
+20.48 -> 20.38 / 20.37)."""
 
 REAL_SHORT_TV_UP_TO = REAL_RAMP_ITERATIONS
 """The longest forward-facing run that gets ``REAL_SHORT_TV_WEIGHT``: 800 iterations, where it won for both methods
@@ -188,8 +189,9 @@ gradient, and later updates look only at kept cells), and ReLU density is exactl
 At 800 iterations 10 % is step 80: fourierf-vm with Floaters-No-More and the band open by step 80 (fern P-CPU) kept
 19 % and 33 % of the grid on seeds 1 and 2 (69 % on seed 20211202) and stalled at train PSNR ~18, val 15.65 and 15.76
 against 20.37; with the update at step 200, 19.57 and 19.80. On each method's P-CPU choice the later update costs
-nothing (val, 3 seeds, step 80 -> step 200): fourierf-vm 20.05 -> 20.07, tensorf-vm with Floaters-No-More 20.69 ->
-20.69 (BENCHMARKS.md). From 2000 iterations on, 10 % is step 200 or later anyway."""
+nothing or gains (val, 3 seeds, step 80 -> step 200): fourierf-vm 20.05 -> 20.07, tensorf-vm with Floaters-No-More
+20.42 -> 20.58 (one thread, session 50; rows that did not record their threads read 20.69 both ways; BENCHMARKS.md).
+From 2000 iterations on, 10 % is step 200 or later anyway."""
 
 REAL_OCCUPANCY_FROM = 800
 """Forward-facing runs this long or longer get ``REAL_OCCUPANCY_STEP``; shorter ones (tests, previews) keep 10 %: the

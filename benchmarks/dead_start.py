@@ -10,14 +10,14 @@ Flags after ``--`` go to ``fourierf-train``.
 
 Why: at f0 0.01 the band holds little more than the density's mean, so the whole field is nearly one number; the
 real-scene preset's density is a ReLU, and one unlucky early Adam step can take that number below zero, after which
-nothing passes a gradient and the run renders black until the band opens (README, "A ReLU density that cannot
-stay dead"). Each seed builds the run ``fourierf-train`` would build (same parser, preset, budget rule and sizes; the
-schedules are those of the full ``--iters``) and steps it ``--steps`` times, reading the training MSE of every
-step. A seed counts as dead when its MSE is above ``--dead-mse`` (a black render of fern: ~0.3; a live field is
-below 0.1 within 10 steps) at more than half of the last 10 steps counted: still dark when the count ends (a field
-that TensoRF's ReLU let die stays dark until the band opens, ~70 steps at 64³). One JSON line per seed goes to
-``--out``; the ``quality`` stage trains whole runs of chosen seeds with and without revival and scores them on val
-views.
+nothing passes a gradient and the run renders black until the band opens (docs/few-shot-quality.md, "A ReLU density
+that cannot stay dead"). Each seed builds the run ``fourierf-train`` would build (same parser, preset, budget rule
+and sizes; the schedules are those of the full ``--iters``) and steps it ``--steps`` times, reading the training MSE
+of every step. A seed counts as dead when its MSE is above ``--dead-mse`` (a black render of fern: ~0.3; a live
+field is below 0.1 within 10 steps) at more than half of the last 10 steps counted: still dark when the count ends
+(a field that TensoRF's ReLU let die stays dark until the band opens, ~70 steps at 64³). One JSON line per seed goes
+to ``--out``; the ``quality`` stage trains whole runs of chosen seeds with and without revival and scores them on
+val views.
 """
 
 from __future__ import annotations

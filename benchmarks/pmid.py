@@ -737,7 +737,7 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         },
         # ... and tensorf-vm's val choice under TensoRF's plain ReLU: its recorded rows (commit 71362f1) predate the
         # reviving ReLU, and a rerun under the current default read val 20.14 against the recorded 20.70. Plain reads
-        # 20.14 too, so the revival is not what moved it; the thread count is (the docstring; README).
+        # 20.14 too, so the revival is not what moved it; the thread count is (the docstring; docs/few-shot-quality.md).
         "lr0.08-tvconst-tv4-fnm-plain": [*FERN_TV4, *FNM, *PLAIN_RELU],
         # ... and FreeNeRF's occlusion weight (0.01, the preset's) off, tripled and tenfold on the image-plane rule:
         # 20.22, 20.59, 20.48 against 20.51; 0.03 on seed 1 19.54 against 19.86, so 0.01 stays.

@@ -95,8 +95,9 @@ mean of 3 seeds: fourierf-vm constant TV 1 19.85, 4 20.05 (one seed: TV 2 19.88)
 step 750: 21.06), TV 4 21.36; tensorf-vm decaying TV 1 18.83, constant TV 4 20.84. At 3000 iterations on P-CPU's 128³
 grid, one seed, it lost instead (constant TV 1 -> 4: fourierf-vm 21.22 -> 20.94, tensorf-vm 21.15 -> 20.94), where
 TensoRF does not overfit. The stronger TV lifts TensoRF more than FourieRF: it shrinks the P-MID fern test gap from
-+2.85 to +0.25 dB (3 seeds), and with Floaters-No-More on top tensorf-vm leads by 0.54 dB on test (3 seeds;
-BENCHMARKS.md); on fourierf-vm it does nothing there (val 21.36 -> 21.33)."""
++2.85 to +0.25 dB (3 seeds), and with Floaters-No-More on top tensorf-vm leads by 0.70 dB on test (3 seeds, the CPU
+seed rerun on one thread in session 51; 0.54 before; BENCHMARKS.md); on fourierf-vm it does nothing there (val
+21.36 -> 21.33)."""
 
 
 def _tv(weight: float) -> dict[str, Any]:

@@ -180,7 +180,9 @@ waiting won, 20.74 against 20.40). The boundary is the one the band uses (``REAL
 pays where the band opens early. The CPU pairs above did not record their thread count; the one pair rerun on one
 thread (session 49; P-CPU's grid at 3000, seed 20211202) reads 21.44 -> 21.33, the revival acting on one batch,
 where it had been recorded as 20.94 -> 21.19, so the rule rests on P-MID's grid, the one a CPU run of fern gets by
-default. In tensorf-vm's runs it never acts there (P-CPU's grid at 3000, 3 seeds: revived on 0 batches)."""
+default; there the CPU seed's run at once reads 21.16 rerun on one thread (session 51, revived on 3 batches; its
+waiting run, 21.36, not rerun), which leaves the two H100 seeds. In tensorf-vm's runs it never acts there (P-CPU's
+grid at 3000, 3 seeds: revived on 0 batches)."""
 
 
 REAL_OCCUPANCY_STEP = 200

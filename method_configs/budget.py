@@ -89,14 +89,15 @@ BACKGROUND_PATH = "pipeline.effects.background"
 
 REAL_TV_WEIGHT = 4.0
 """Forward-facing scenes, both methods, runs over ``REAL_SHORT_TV_UP_TO`` iterations: a constant TV weight on the
-density and appearance planes (the paper's 1.0, TensoRF's decaying to 0.1). Fern val at grid lr 0.08, 800 iterations,
-mean of 3 seeds: fourierf-vm constant TV 1 19.85, 4 20.05 (one seed: TV 2 19.88); tensorf-vm constant TV 1 18.20, 4
-19.02 (one seed: TV 2 18.75). 3000 iterations (P-MID), one seed: fourierf-vm constant TV 1 21.18 (decaying, band open by
-step 750: 21.06), TV 4 21.36; tensorf-vm decaying TV 1 18.83, constant TV 4 20.84. At 3000 iterations on P-CPU's 128³
-grid, one seed, it lost instead (constant TV 1 -> 4: fourierf-vm 21.22 -> 20.94, tensorf-vm 21.15 -> 20.94), where
-TensoRF does not overfit. The stronger TV lifts TensoRF more than FourieRF: it shrinks the P-MID fern test gap from
-+2.85 to +0.25 dB (3 seeds), and with Floaters-No-More on top tensorf-vm leads by 0.70 dB on test (3 seeds, the CPU
-seed rerun on one thread in session 51; 0.54 before; BENCHMARKS.md); on fourierf-vm it does nothing there (val
+density and appearance planes (the paper's 1.0, TensoRF's decaying to 0.1). Fern val at grid lr 0.08, 800
+iterations, mean of 3 seeds: fourierf-vm constant TV 1 19.85, 4 20.05 (one seed: TV 2 19.88); tensorf-vm constant TV
+1 18.20, 4 19.02 (one seed: TV 2 18.75). 3000 iterations (P-MID), one seed: fourierf-vm constant TV 1 21.18
+(decaying, band open by step 750: 21.06), TV 4 21.36 (21.13 rerun on one thread, session 52; the TV 1 run not
+rerun); tensorf-vm decaying TV 1 18.83, constant TV 4 20.84 (20.95 on one thread). At 3000 iterations on P-CPU's
+128³ grid, one seed, it lost instead (constant TV 1 -> 4: fourierf-vm 21.22 -> 20.94, tensorf-vm 21.15 -> 20.94),
+where TensoRF does not overfit. The stronger TV lifts TensoRF more than FourieRF: it shrinks the P-MID fern test gap
+from +2.85 to +0.25 dB (3 seeds), and with Floaters-No-More on top tensorf-vm leads by 0.70 dB on test (3 seeds, the
+CPU seed rerun on one thread in session 51; 0.54 before; BENCHMARKS.md); on fourierf-vm it does nothing there (val
 21.36 -> 21.33)."""
 
 
@@ -172,17 +173,18 @@ REAL_REVIVE_AT_ONCE_ABOVE = REAL_RAMP_ITERATIONS
 """Forward-facing scenes, both methods: a run longer than this revives a dark density field at its first dark batch
 (``revive_patience`` 1) instead of waiting 16 batches for a fresh field to come back by itself (the ReLU's default).
 At 800 iterations waiting won (``benchmarks/dead_start.py``, 64³: +0.27 dB val a seed over TensoRF's ReLU against
-+0.22 reviving at once; fern P-CPU seed 20211202 20.24 against 19.82); at 3000 (P-MID, 96³ -> 192³, 2048 rays) reviving
-at once won on each of three seeds (val, wait -> at once: seed 20211202, CPU, 21.36 -> 21.66; seeds 1 and 2, H100,
-21.18 / 20.99 -> 21.41 / 21.33, with TensoRF's ReLU 21.32 / 21.24 and an earlier H100 run at once 21.63 / 21.47), and
-at 1500 on P-CPU's 64³ -> 128³ (19.92 -> 20.36, with the band open by step 800; with the band over the whole run
-waiting won, 20.74 against 20.40). The boundary is the one the band uses (``REAL_RAMP_ITERATIONS``): reviving at once
-pays where the band opens early. The CPU pairs above did not record their thread count; the one pair rerun on one
-thread (session 49; P-CPU's grid at 3000, seed 20211202) reads 21.44 -> 21.33, the revival acting on one batch,
-where it had been recorded as 20.94 -> 21.19, so the rule rests on P-MID's grid, the one a CPU run of fern gets by
-default; there the CPU seed's run at once reads 21.16 rerun on one thread (session 51, revived on 3 batches; its
-waiting run, 21.36, not rerun), which leaves the two H100 seeds. In tensorf-vm's runs it never acts there (P-CPU's
-grid at 3000, 3 seeds: revived on 0 batches)."""
++0.22 reviving at once; fern P-CPU seed 20211202 20.24 against 19.82); at 3000 (P-MID, 96³ -> 192³, 2048 rays)
+reviving at once won on each of three seeds (val, wait -> at once: seed 20211202, CPU, one thread, 21.13 -> 21.16,
+first recorded as 21.36 -> 21.66 without its threads; seeds 1 and 2, H100, 21.18 / 20.99 -> 21.41 / 21.33, with
+TensoRF's ReLU 21.32 / 21.24 and an earlier H100 run at once 21.63 / 21.47), and at 1500 on P-CPU's 64³ -> 128³
+(19.92 -> 20.36, with the band open by step 800; with the band over the whole run waiting won, 20.74 against 20.40).
+The boundary is the one the band uses (``REAL_RAMP_ITERATIONS``): reviving at once pays where the band opens early.
+The CPU pairs as first recorded did not record their thread count; rerun on one thread, the pair on P-CPU's grid
+(session 49; 3000 iterations, seed 20211202) reads 21.44 -> 21.33, the revival acting on one batch, where it had
+been recorded as 20.94 -> 21.19, so the rule rests on P-MID's grid, the one a CPU run of fern gets by default; there
+the CPU seed's one-thread pair (sessions 51 and 52: revived on 3 batches, and on none while waiting) still favours
+it, if only by 0.03 dB val (test 20.27 -> 20.51), so the H100 seeds carry most of it. In tensorf-vm's runs it never
+acts there (P-CPU's grid at 3000, 3 seeds, and P-MID's CPU seed at TV 4: revived on 0 batches)."""
 
 
 REAL_OCCUPANCY_STEP = 200

@@ -98,7 +98,7 @@ rerun); tensorf-vm decaying TV 1 18.83, constant TV 4 20.84 (20.95 on one thread
 where TensoRF does not overfit. The stronger TV lifts TensoRF more than FourieRF: it shrinks the P-MID fern test gap
 from +2.85 to +0.25 dB (3 seeds), and with Floaters-No-More on top tensorf-vm leads by 0.70 dB on test (3 seeds, the
 CPU seed rerun on one thread in session 51; 0.54 before; BENCHMARKS.md); on fourierf-vm it does nothing there (val
-21.36 -> 21.33)."""
+21.36 -> 21.33, neither run recording its threads; the first reads 21.13 on one thread)."""
 
 
 def _tv(weight: float) -> dict[str, Any]:

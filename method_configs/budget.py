@@ -91,14 +91,14 @@ REAL_TV_WEIGHT = 4.0
 """Forward-facing scenes, both methods, runs over ``REAL_SHORT_TV_UP_TO`` iterations: a constant TV weight on the
 density and appearance planes (the paper's 1.0, TensoRF's decaying to 0.1). Fern val at grid lr 0.08, 800
 iterations, mean of 3 seeds: fourierf-vm constant TV 1 19.85, 4 20.05 (one seed: TV 2 19.88); tensorf-vm constant TV
-1 18.20, 4 19.02 (one seed: TV 2 18.75). 3000 iterations (P-MID), one seed: fourierf-vm constant TV 1 21.18
-(decaying, band open by step 750: 21.06), TV 4 21.36 (21.13 rerun on one thread, session 52; the TV 1 run not
-rerun); tensorf-vm decaying TV 1 18.83, constant TV 4 20.84 (20.95 on one thread). At 3000 iterations on P-CPU's
-128³ grid, one seed, it lost instead (constant TV 1 -> 4: fourierf-vm 21.22 -> 20.94, tensorf-vm 21.15 -> 20.94),
-where TensoRF does not overfit. The stronger TV lifts TensoRF more than FourieRF: it shrinks the P-MID fern test gap
+1 18.20, 4 19.02 (one seed: TV 2 18.75). 3000 iterations, one seed, one CPU thread: P-MID fourierf-vm constant TV 1
+21.21 (decaying, band open by step 750: 21.06), TV 4 21.13, a tie (first recorded 21.18 -> 21.36 without their
+threads); tensorf-vm decaying TV 1 18.83, constant TV 4 20.95 (20.84 recorded); on P-CPU's 128³ grid constant TV 1
+-> 4 fourierf-vm 20.77 -> 21.44, tensorf-vm 21.04 -> 21.73 (first recorded without their threads as a loss, 21.22 ->
+20.94 and 21.15 -> 20.94). The stronger TV lifts TensoRF more than FourieRF: it shrinks the P-MID fern test gap
 from +2.85 to +0.25 dB (3 seeds), and with Floaters-No-More on top tensorf-vm leads by 0.70 dB on test (3 seeds, the
-CPU seed rerun on one thread in session 51; 0.54 before; BENCHMARKS.md); on fourierf-vm it does nothing there (val
-21.36 -> 21.33, neither run recording its threads; the first reads 21.13 on one thread)."""
+CPU seed rerun on one thread in session 51; 0.54 before; BENCHMARKS.md); on fourierf-vm, one seed on one thread, it
+lifts val 21.13 -> 21.58 (first recorded 21.36 -> 21.33 without threads; seeds 1 and 2 not run, so in no rule)."""
 
 
 def _tv(weight: float) -> dict[str, Any]:
@@ -128,7 +128,8 @@ SHORT_RUN_SETTINGS: dict[tuple[str, str], dict[str, Any]] = {
 REAL_RAMP_ITERATIONS = 800
 """Forward-facing scenes, FourieRF: the band opens over this many iterations, or over the whole run if it is shorter.
 The real-scene preset opens it over the whole run, which at 800 iterations won on val; at 3000 the band was open only
-at the last step and opening it by step 800 won (fern val 20.04 -> 21.22 at 64³ -> 128³, 19.97 -> 21.06 at 192³).
+at the last step and opening it by step 750 won (fern val 20.03 -> 20.77 at 64³ -> 128³ on one CPU thread, first
+recorded 20.04 -> 21.22 without threads; 19.97 -> 21.06 at 192³).
 At 1500 (64³ -> 128³, 3 seeds, with the revival below) it held by less than a seed's spread: 20.24 against 20.17 for
 the whole run; at 3000 opening by step 1500 read 21.41 against the rule's 21.19 on seed 20211202 but 20.65 and 20.70
 on seeds 1 and 2, where the rule read 20.71 and 21.02 (means 20.92 against 20.97).

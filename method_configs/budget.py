@@ -93,12 +93,13 @@ density and appearance planes (the paper's 1.0, TensoRF's decaying to 0.1). Fern
 iterations, mean of 3 seeds: fourierf-vm constant TV 1 19.85, 4 20.05 (one seed: TV 2 19.88); tensorf-vm constant TV
 1 18.20, 4 19.02 (one seed: TV 2 18.75). 3000 iterations, one seed, one CPU thread: P-MID fourierf-vm constant TV 1
 21.21 (decaying, band open by step 750: 21.06), TV 4 21.13, a tie (first recorded 21.18 -> 21.36 without their
-threads); tensorf-vm decaying TV 1 18.83, constant TV 4 20.95 (20.84 recorded); on P-CPU's 128³ grid constant TV 1
--> 4 fourierf-vm 20.77 -> 21.44, tensorf-vm 21.04 -> 21.73 (first recorded without their threads as a loss, 21.22 ->
-20.94 and 21.15 -> 20.94). The stronger TV lifts TensoRF more than FourieRF: it shrinks the P-MID fern test gap
-from +2.85 to +0.25 dB (3 seeds), and with Floaters-No-More on top tensorf-vm leads by 0.70 dB on test (3 seeds, the
-CPU seed rerun on one thread in session 51; 0.54 before; BENCHMARKS.md); on fourierf-vm, one seed on one thread, it
-lifts val 21.13 -> 21.58 (first recorded 21.36 -> 21.33 without threads; seeds 1 and 2 not run, so in no rule)."""
+threads); tensorf-vm decaying TV 1 18.83 (H100), constant TV 4 20.95 (20.84 recorded); on P-CPU's 128³ grid constant
+TV 1 -> 4 fourierf-vm 20.77 -> 21.44, tensorf-vm 21.04 -> 21.73 (first recorded without their threads as a loss,
+21.22 -> 20.94 and 21.15 -> 20.94). The stronger TV lifts TensoRF more than FourieRF: it shrinks the P-MID fern test
+gap from +2.85 to +0.25 dB (3 seeds), and with Floaters-No-More on top tensorf-vm leads by 0.70 dB on test (3 seeds,
+the CPU seed rerun on one thread in session 51; 0.54 before; BENCHMARKS.md); Floaters-No-More on fourierf-vm, one
+seed on one thread, lifts val 21.13 -> 21.58 (first recorded 21.36 -> 21.33 without threads; seeds 1 and 2 not run,
+so in no rule)."""
 
 
 def _tv(weight: float) -> dict[str, Any]:

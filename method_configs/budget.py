@@ -97,9 +97,9 @@ threads); tensorf-vm decaying TV 1 18.83 (H100), constant TV 4 20.95 (20.84 reco
 TV 1 -> 4 fourierf-vm 20.77 -> 21.44, tensorf-vm 21.04 -> 21.73 (first recorded without their threads as a loss,
 21.22 -> 20.94 and 21.15 -> 20.94). The stronger TV lifts TensoRF more than FourieRF: it shrinks the P-MID fern test
 gap from +2.85 to +0.25 dB (3 seeds), and with Floaters-No-More on top tensorf-vm leads by 0.70 dB on test (3 seeds,
-the CPU seed rerun on one thread in session 51; 0.54 before; BENCHMARKS.md); Floaters-No-More on fourierf-vm, one
-seed on one thread, lifts val 21.13 -> 21.58 (first recorded 21.36 -> 21.33 without threads; seeds 1 and 2 not run,
-so in no rule)."""
+the CPU seed rerun on one thread in session 51; 0.54 before; BENCHMARKS.md). Floaters-No-More on fourierf-vm lifted
+one seed's val 21.13 -> 21.58 but ties over three (mean 21.31 against this rule's 21.30, seeds 1 and 2 on one CPU
+thread against H100 rows; test gap -0.62 then), and lowers it at 800 iterations, so it is in no rule."""
 
 
 def _tv(weight: float) -> dict[str, Any]:

@@ -118,11 +118,11 @@ GRIDS = (
     ),
     Grid(
         "docs/fern_grid_pmid.png",
-        "P-MID runs of session 25 under the current rule, each method's val choice at P-MID then (since session 54 "
-        "fourierf-vm's is the same setting with Floaters-No-More, by 0.01 dB of mean val over 3 seeds): fourierf-vm "
-        "`lr0.08-tvconst-ramp0.2667-tv4-revive1` (val / test 21.84 / 20.99; its recorded run of session 23, 21.66 / "
-        "20.92) and tensorf-vm `lr0.08-tvconst-tv4-fnm` (constant TV 4 with Floaters-No-More; 21.90 / 21.12, "
-        "recorded 21.89 / 21.14), seed 20211202, CPU",
+        "P-MID runs of session 25 under the current rule, each method's val choice at P-MID then (since session 56 "
+        "fourierf-vm's is the same setting with Floaters-No-More from step 800, by 0.12 dB of mean val over 3 "
+        "seeds): fourierf-vm `lr0.08-tvconst-ramp0.2667-tv4-revive1` (val / test 21.84 / 20.99; its recorded run of "
+        "session 23, 21.66 / 20.92) and tensorf-vm `lr0.08-tvconst-tv4-fnm` (constant TV 4 with Floaters-No-More; "
+        "21.90 / 21.12, recorded 21.89 / 21.14), seed 20211202, CPU",
         ("fourierf-vm", "tensorf-vm"),
         "both are opaque everywhere. tensorf-vm's RGB is the sharper of the two (the fronds). fourierf-vm's depth is "
         "one smooth layer for the plant but holds a near blob at the foot of the trunk (dark, in both views) and a "

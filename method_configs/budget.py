@@ -101,8 +101,8 @@ the CPU seed rerun on one thread in session 51; 0.54 before; BENCHMARKS.md). Flo
 one seed's val 21.13 -> 21.58 but ties over three (mean 21.31 against this rule's 21.30, seeds 1 and 2 on one CPU
 thread against H100 rows; test gap -0.62 then), and lowers it at 800 iterations, so it is in no rule. Started at
 step 800 once the band is open (sessions 55 and 56, one CPU thread), it read mean val 21.43 over three seeds (21.31 /
-22.07 / 20.92) against this rule's 21.30, BENCHMARKS.md's P-MID val choice (test gap -0.60), but on P-CPU's 128³ grid
-at 3000 iterations it lost on every seed (mean 20.92 against 21.10), so that too is in no rule."""
+22.07 / 20.92) against this rule's 21.30, which makes it BENCHMARKS.md's P-MID val choice (test gap -0.60), but on
+P-CPU's 128³ grid at 3000 iterations it lost on every seed (mean 20.92 against 21.10), so that too is in no rule."""
 
 
 def _tv(weight: float) -> dict[str, Any]:

@@ -96,14 +96,13 @@ iterations, mean of 3 seeds: fourierf-vm constant TV 1 19.85, 4 20.05 (one seed:
 threads); tensorf-vm decaying TV 1 18.83 (H100), constant TV 4 20.95 (20.84 recorded); on P-CPU's 128³ grid constant
 TV 1 -> 4 fourierf-vm 20.77 -> 21.44, tensorf-vm 21.04 -> 21.73 (first recorded without their threads as a loss,
 21.22 -> 20.94 and 21.15 -> 20.94). The stronger TV lifts TensoRF more than FourieRF: it shrinks the P-MID fern test
-gap from +2.85 to +0.25 dB (3 seeds), and with Floaters-No-More on top tensorf-vm leads by 0.68 dB on test (3 seeds;
-tensorf-vm's all on one CPU thread since sessions 51 and 57, this rule's seeds 1 and 2 H100 rows; 0.54 before;
-BENCHMARKS.md). Floaters-No-More on fourierf-vm lifted one seed's val 21.13 -> 21.58 but ties over three (mean 21.31
-against this rule's 21.30, seeds 1 and 2 on one CPU thread against H100 rows; test gap -0.62 then), and lowers it at 800
-iterations, so it is in no rule. Started at step 800 once the band is open (sessions 55 and 56, one CPU thread), it read
-mean val 21.43 over three seeds (21.31 / 22.07 / 20.92) against this rule's 21.30, which makes it BENCHMARKS.md's P-MID
-val choice (test gap -0.58), but on P-CPU's 128³ grid at 3000 iterations it lost on every seed (mean 20.92 against
-21.10), so that too is in no rule."""
+gap from +2.85 to +0.25 dB (3 seeds), and with Floaters-No-More on top tensorf-vm leads by 0.74 dB on test (3 seeds; all
+on one CPU thread since sessions 51, 57 and 58; 0.54 before; BENCHMARKS.md). Floaters-No-More on fourierf-vm lifted one
+seed's val 21.13 -> 21.58 but ties over three (mean 21.31 against this rule's 21.33, all on one CPU thread since session
+58; test gap -0.62 then), and lowers it at 800 iterations, so it is in no rule. Started at step 800 once the band is
+open (sessions 55 and 56, one CPU thread), it read mean val 21.43 over three seeds (21.31 / 22.07 / 20.92) against this
+rule's 21.33, which makes it BENCHMARKS.md's P-MID val choice (test gap -0.58), but on P-CPU's 128³ grid at 3000
+iterations it lost on every seed (mean 20.92 against 21.10), so that too is in no rule."""
 
 
 def _tv(weight: float) -> dict[str, Any]:
@@ -182,7 +181,8 @@ At 800 iterations waiting won (``benchmarks/dead_start.py``, 64³: +0.27 dB val 
 +0.22 reviving at once; fern P-CPU seed 20211202 20.24 against 19.82); at 3000 (P-MID, 96³ -> 192³, 2048 rays)
 reviving at once won on each of three seeds (val, wait -> at once: seed 20211202, CPU, one thread, 21.13 -> 21.16,
 first recorded as 21.36 -> 21.66 without its threads; seeds 1 and 2, H100, 21.18 / 20.99 -> 21.41 / 21.33, with
-TensoRF's ReLU 21.32 / 21.24 and an earlier H100 run at once 21.63 / 21.47), and at 1500 on P-CPU's 64³ -> 128³
+TensoRF's ReLU 21.32 / 21.24 and an earlier H100 run at once 21.63 / 21.47; at once on one CPU thread, session 58,
+21.88 / 20.94, the waiting runs not rerun), and at 1500 on P-CPU's 64³ -> 128³
 (19.92 -> 20.36, with the band open by step 800; with the band over the whole run waiting won, 20.74 against 20.40).
 The boundary is the one the band uses (``REAL_RAMP_ITERATIONS``): reviving at once pays where the band opens early.
 The CPU pairs as first recorded did not record their thread count; rerun on one thread, the pair on P-CPU's grid

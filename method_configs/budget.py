@@ -75,15 +75,15 @@ OBJECT_RANDOM_BACKGROUND_FROM = 800
 after the first occupancy update, white before (``--pipeline.model.random-background-from``'s default; README, "Scene
 effects"). On white, white density outside the object's silhouette costs the training views nothing and stays; a random
 background charges it. Lego val, TensoRF's white -> this: tensorf-vm 22.70 -> 23.26 at 800 iterations (mean of 3 seeds;
-test 22.79 -> 23.08), 22.84 -> 23.45 at 1500, 22.45 -> 22.84 at 3000 (P-MID, TV 6, 3 seeds); fourierf-vm with the
+test 22.79 -> 23.08), 22.84 -> 23.45 at 1500, 22.45 -> 22.83 at 3000 (P-MID, TV 6, 3 seeds); fourierf-vm with the
 paper's band 22.73 -> 23.13 at 800. From the first step instead it emptied fields that had not lit and kept stray fog
 where no training ray crosses the background (P-MID, fourierf-vm with the band below: 20.99 without the density L1,
 21.71 with it from the first update, 22.84 starting after it). Measured from 800 iterations up; shorter runs, tests and
 previews keep white. FourieRF keeps the paper's first band (f0 0.3) on it: a narrow one (0.05) fills the object's hull
 with smooth density, which the random background clears, and won at 800 iterations (23.13 -> 23.23, 3 seeds; session
-30's rule) but lost at every longer budget (3 seeds each: 1500 23.57 -> 23.29, 3000 23.39 -> 23.19, P-MID 22.87 ->
+30's rule) but lost at every longer budget (3 seeds each: 1500 23.57 -> 23.29, 3000 23.39 -> 23.19, P-MID 22.88 ->
 22.80), where the paper's band is level with tensorf-vm or ahead of it (1500: 23.45, 3000: 23.43, P-MID at TV 6:
-22.84)."""
+22.83)."""
 
 BACKGROUND_PATH = "pipeline.effects.background"
 

@@ -530,14 +530,7 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
             ]
             for w in ("0.001", "0.01", "0.1")
         },
-                "wd0-nodecay-lr0.04-tv6-bgwarm": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_AFTER_UPDATE],
-        # Session 58: Floaters-No-More, the lever never run on an object, on each method's val choice at
-        # P-CPU (fourierf-vm's f0.05, tensorf-vm's tv4-comp8) and at P-MID (tv4-comp8 and tv6).
-        "wd0-nodecay-lr0.04-tv4-comp8-bgwarm-fnm": [*LEGO_BGWARM, *FNM],
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-fnm": [
-            *LEGO_COMP8, *first_band("0.05"), *RANDOM_AFTER_UPDATE, *FNM],
-        "wd0-nodecay-lr0.04-tv6-bgwarm-fnm": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_AFTER_UPDATE, *FNM],
-
+        "wd0-nodecay-lr0.04-tv6-bgwarm": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_AFTER_UPDATE],
         # Session 32: TensoRF's TV need at P-HIGH's image and grid (TV 6 won at P-MID's, TV 4 at P-CPU's).
         # Session 33: TV 14, past TV 10 where TensoRF's val still rose, on the same 300³ grid (pmid300). Session 35:
         # TV 12 at P-HIGH (its val rose to TV 10 there), with fourierf-vm's TV 8 below, so both searches are two-sided.

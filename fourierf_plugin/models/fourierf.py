@@ -523,7 +523,8 @@ class FourieRFModelConfig(InstantiateConfig):
     On white first the L1 clears the fog and the field lights; the random background then charges what white cannot,
     density outside the object's silhouette (README, "Scene effects")."""
     floaters_gradient_scaling: bool = False
-    """'Floaters No More': scale density and colour gradients by clamp(t², 0, 1) (t: the ray parameter)."""
+    """'Floaters No More': scale density and colour gradients by clamp(t², 0, 1) (t: the ray parameter). It acts
+    where samples lie within 1 of the camera (NDC, forward-facing); past Blender's near plane 2 it does nothing."""
     floaters_gradient_scaling_from: float = 0.0
     """Fraction of the run from which Floaters-No-More scales gradients (0: the whole run, as in its paper). While
     the band is narrow FourieRF paints no near floaters and the scaling only slows the near geometry; once the band

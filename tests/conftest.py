@@ -12,6 +12,9 @@ from typing import NoReturn
 import pytest
 import torch
 
+from tests.helpers import TINY_SCENE
+from tests.scenes import write_llff_scene
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SHARED_DIR = Path(os.environ.get("FOURIERF_SHARED", REPO_ROOT.parent / "shared"))
 
@@ -61,3 +64,15 @@ def single_torch_thread() -> Iterator[None]:
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="module")
+def llff_scene(tmp_path_factory) -> Path:
+    """A 20-image synthetic LLFF scene with 8x6 images (tests/scenes.py), one per test module."""
+    return write_llff_scene(tmp_path_factory.mktemp("llff") / "scene")
+
+
+@pytest.fixture(params=["blender", "llff"])
+def either_scene(request: pytest.FixtureRequest, llff_scene: Path) -> Path:
+    """Each kind of scene in turn: the bundled tiny Blender object (box rays) and the synthetic LLFF one (NDC rays)."""
+    return TINY_SCENE if request.param == "blender" else llff_scene

@@ -16,7 +16,6 @@ from fourierf_plugin.model_components.marching import densities, densities_every
 from fourierf_plugin.scripts.train import build_config, parse_args
 from tests.engine.sync_counter import SyncCounter
 from tests.helpers import TINY_FLAGS, TINY_SCENE
-from tests.scenes import write_llff_scene
 
 ITERS = 100
 LATE_STRUCTURE = ["--pipeline.model.occupancy-update-fractions", "0.6", "0.8"]
@@ -38,11 +37,6 @@ def _step(trainer: Trainer, optimizer: torch.optim.Optimizer, step: int) -> dict
     optimizer.step()
     pipeline.after_step(step)
     return metrics
-
-
-@pytest.fixture(scope="module")
-def llff_scene(tmp_path_factory) -> Path:
-    return write_llff_scene(tmp_path_factory.mktemp("llff") / "scene")
 
 
 @pytest.mark.parametrize("scene", ["blender", "llff"])

@@ -29,12 +29,6 @@ from fourierf_plugin.method_configs.budget import (
 )
 from fourierf_plugin.scripts.train import given_options, parse_args
 from tests.helpers import TINY_SCENE
-from tests.scenes import write_llff_scene
-
-
-@pytest.fixture(scope="module")
-def llff_scene(tmp_path_factory) -> Path:
-    return write_llff_scene(tmp_path_factory.mktemp("llff") / "scene")
 
 
 def finished(method: str, data: Path, *flags: str):

@@ -34,7 +34,6 @@ from fourierf_plugin.method_configs.scene_presets import (
 from fourierf_plugin.scripts.train import parse_args
 from fourierf_plugin.utils.errors import UserError
 from tests.helpers import TINY_SCENE
-from tests.scenes import write_llff_scene
 
 VM_REAL = REAL_SCENE_SETTINGS | VM_REAL_SCENE_SETTINGS
 
@@ -43,12 +42,6 @@ def _get(obj, path: str):
     for part in path.split("."):
         obj = getattr(obj, part)
     return obj
-
-
-@pytest.fixture(scope="module")
-def llff_scene(tmp_path_factory) -> Path:
-    """A 20-image synthetic LLFF scene with 8x6 images (tests/scenes.py)."""
-    return write_llff_scene(tmp_path_factory.mktemp("llff") / "scene")
 
 
 def raw(data: Path, *flags: str, method: str = "fourierf-vm") -> TrainerConfig:

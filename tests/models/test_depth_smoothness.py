@@ -14,16 +14,14 @@ import torch
 
 from fourierf_plugin.utils.errors import UserError
 from tests.helpers import TINY_SCENE
-from tests.models.test_scene_effects import pipeline_for
-from tests.scenes import write_llff_scene
+from tests.models.test_scene_effects import (
+    assert_gradients_reach_the_density_grids,
+    assert_loss_is_the_sum_of_its_terms,
+    assert_same_training_batches,
+    pipeline_for,
+)
 
 ON = ("--pipeline.model.depth-smoothness-weight", "0.1", "--pipeline.model.depth-smoothness-patch-size", "4")
-
-
-@pytest.fixture(scope="module")
-def llff_scene(tmp_path_factory) -> Path:
-    """A 20-image synthetic LLFF scene with 8x6 images (tests/scenes.py)."""
-    return write_llff_scene(tmp_path_factory.mktemp("llff") / "scene")
 
 
 def test_off_by_default_renders_no_patches(llff_scene: Path, tmp_path: Path, monkeypatch) -> None:
@@ -46,14 +44,11 @@ def test_the_term_is_finite_and_reaches_the_density_grids(llff_scene: Path, tmp_
     term = model.unseen_depth_smoothness(origins, directions, 4)
     assert term.ndim == 0 and torch.isfinite(term) and float(term.detach()) >= 0.0
     term.backward()
-    density = [p.grad for name, p in model.named_parameters() if name.startswith("field.density_grid")]
-    assert any(g is not None and bool(g.abs().sum() > 0) for g in density)
-    assert all(g is None or bool(torch.isfinite(g).all()) for g in density)
+    assert_gradients_reach_the_density_grids(model)
     model.zero_grad()
     loss, metrics = pipeline.train_step(1)
     assert "depth_smoothness" in metrics and torch.isfinite(loss)
-    extra = float(metrics["loss"]) - sum(float(v) for k, v in metrics.items() if k not in ("loss", "psnr"))
-    assert extra == pytest.approx(0.0, abs=1e-6)  # the term is part of the loss
+    assert_loss_is_the_sum_of_its_terms(metrics)
 
 
 def test_patches_are_ndc_rays_from_the_near_plane(llff_scene: Path, tmp_path: Path) -> None:
@@ -71,17 +66,7 @@ def test_a_patch_larger_than_the_images_is_one_clear_error(llff_scene: Path, tmp
 
 
 def test_turning_it_on_keeps_the_training_batches_and_their_jitter(llff_scene: Path, tmp_path: Path) -> None:
-    """The patches draw from their own stream: with the same parameters, steps after one with the term render the
-    same batch with the same jitter (the same MSE to the last bit) as without it."""
-    torch.manual_seed(0)  # the decoder's layers draw from the global RNG
-    plain = pipeline_for(llff_scene, tmp_path / "plain")
-    torch.manual_seed(0)
-    on = pipeline_for(llff_scene, tmp_path / "on", *ON)
-    for step in range(3):  # train_step computes the loss only: the parameters stay the same
-        _, metrics_plain = plain.train_step(step)
-        _, metrics_on = on.train_step(step)
-        assert float(metrics_plain["mse"]) == float(metrics_on["mse"]), step
-        assert "depth_smoothness" in metrics_on
+    assert_same_training_batches(llff_scene, tmp_path, *ON, term="depth_smoothness")
 
 
 def test_a_checkpoint_keeps_the_patches_stream(llff_scene: Path, tmp_path: Path) -> None:

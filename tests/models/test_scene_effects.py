@@ -26,15 +26,8 @@ from fourierf_plugin.models.fourierf import FourieRFModel, FourieRFModelConfig, 
 from fourierf_plugin.pipelines.base import Pipeline
 from fourierf_plugin.scripts.train import build_config, parse_args
 from tests.helpers import TINY_FLAGS, TINY_SCENE, ndc_model
-from tests.scenes import write_llff_scene
 
 ITERS = 50
-
-
-@pytest.fixture(scope="module")
-def llff_scene(tmp_path_factory) -> Path:
-    """A 20-image synthetic LLFF scene with 8x6 images (tests/scenes.py)."""
-    return write_llff_scene(tmp_path_factory.mktemp("llff") / "scene")
 
 
 def pipeline_for(data: Path, out: Path, *flags: str) -> Pipeline:
@@ -53,6 +46,33 @@ def forbid(monkeypatch, module: str, name: str) -> None:
         raise AssertionError(f"{name} must not run for this scene")
 
     monkeypatch.setattr(f"{module}.{name}", forbidden)
+
+
+def assert_loss_is_the_sum_of_its_terms(metrics: dict) -> None:
+    """Every logged term is part of the loss (a regulariser that is logged but not added would pass unseen)."""
+    extra = float(metrics["loss"]) - sum(float(v) for k, v in metrics.items() if k not in ("loss", "psnr"))
+    assert extra == pytest.approx(0.0, abs=1e-6)
+
+
+def assert_gradients_reach_the_density_grids(model: FourieRFModel) -> None:
+    """Some density parameter has a non-zero gradient, and none has a non-finite one."""
+    density = [p.grad for name, p in model.named_parameters() if name.startswith("field.density_grid")]
+    assert any(g is not None and bool(g.abs().sum() > 0) for g in density)
+    assert all(g is None or bool(torch.isfinite(g).all()) for g in density)
+
+
+def assert_same_training_batches(data: Path, out: Path, *flags: str, term: str) -> None:
+    """With the same parameters, a pipeline with ``flags`` renders the same batches with the same jitter as one
+    without (the same MSE to the last bit) over three steps, and logs ``term``: its rays draw from their own stream."""
+    torch.manual_seed(0)  # the decoder's layers draw from the global RNG
+    plain = pipeline_for(data, out / "plain")
+    torch.manual_seed(0)
+    on = pipeline_for(data, out / "on", *flags)
+    for step in range(3):  # train_step computes the loss only: the parameters stay the same
+        _, metrics_plain = plain.train_step(step)
+        _, metrics_on = on.train_step(step)
+        assert float(metrics_plain["mse"]) == float(metrics_on["mse"]), step
+        assert term in metrics_on
 
 
 # -- pipelines ------------------------------------------------------------------------------------------------------

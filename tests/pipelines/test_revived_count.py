@@ -6,17 +6,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import pytest
 import torch
 
 from tests.helpers import TINY_SCENE
 from tests.models.test_scene_effects import pipeline_for
-from tests.scenes import write_llff_scene
-
-
-@pytest.fixture(scope="module")
-def llff_scene(tmp_path_factory) -> Path:
-    return write_llff_scene(tmp_path_factory.mktemp("llff") / "scene")
 
 
 def _fill_density(pipeline, line_value: float) -> None:

@@ -360,6 +360,11 @@ def distortion(weight: str) -> list[str]:
     return ["--pipeline.model.distortion-weight", weight]
 
 
+def entropy(weight: str) -> list[str]:
+    """InfoNeRF's ray entropy at ``weight`` on the training rays and 1024 rays from unseen poses."""
+    return ["--pipeline.model.entropy-weight", weight]
+
+
 TV_LOW = tv_weights(0.1)
 LEGO_TV4 = [*RULE_LEGO, *tv_weights(4.0)]
 """The object rule of sessions 16-26 (TV 4), which the lego settings of sessions 20 and 25-27 vary; since session 27
@@ -529,6 +534,19 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
                 *LEGO_BGWARM, *distortion(w),
             ]
             for w in ("0.001", "0.01", "0.1")
+        },
+        # Session 59: InfoNeRF's ray entropy on each method's val choice.
+        **{
+            f"wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-ent{w}": [
+                *LEGO_COMP8, *first_band("0.05"), *RANDOM_AFTER_UPDATE, *entropy(w),
+            ]
+            for w in ("0.00003", "0.0001", "0.0003", "0.001")
+        },
+        **{
+            f"wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ent{w}": [
+                *LEGO_BGWARM, *entropy(w),
+            ]
+            for w in ("0.00003", "0.0001", "0.0003", "0.001")
         },
         "wd0-nodecay-lr0.04-tv6-bgwarm": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_AFTER_UPDATE],
         # Session 32: TensoRF's TV need at P-HIGH's image and grid (TV 6 won at P-MID's, TV 4 at P-CPU's).
@@ -735,6 +753,15 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         **{
             f"lr0.08-tvconst-tv4-fnm-dist{w}": [*FERN_TV4, *FNM, *distortion(w)]
             for w in ("0.001", "0.01", "0.1")
+        },
+        # Session 59: InfoNeRF's ray entropy on each method's P-CPU val choice, against the same ghosting.
+        **{
+            f"lr0.08-tvconst-tv6-alphamask0.25-zfree-ent{w}": [*fern_image_plane(6), *entropy(w)]
+            for w in ("0.0001", "0.001")
+        },
+        **{
+            f"lr0.08-tvconst-tv6-fnm-alphamask0.25-ent{w}": [*fern_tv(6), *FNM, *OCCUPANCY_AT_STEP_200, *entropy(w)]
+            for w in ("0.0001", "0.001")
         },
         # ... and tensorf-vm's val choice under TensoRF's plain ReLU: its recorded rows (commit 71362f1) predate the
         # reviving ReLU, and a rerun under the current default read val 20.14 against the recorded 20.70. Plain reads

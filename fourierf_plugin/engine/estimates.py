@@ -19,18 +19,11 @@ SECONDS_PER_GENERATED_VALUE = 1.0e-6
 measured on the development machine: three 128² canvases of 16 channels, ~0.77 s)."""
 
 
-def unseen_rays(model: Any) -> int:
-    """Rays an iteration renders for depth smoothness on unseen-view patches (none when it is off)."""
-    if model.depth_smoothness_weight <= 0:
-        return 0
-    return model.depth_smoothness_patches * model.depth_smoothness_patch_size**2
-
-
 def estimate_seconds(config: Any, threads: int) -> float:
     """A CPU run's training time from the measured cost (scaled by the threads it gets)."""
     field = config.pipeline.model.field
     side = field.n_voxels_final ** (1.0 / 3.0)
-    rays = config.pipeline.datamanager.rays_per_batch + unseen_rays(config.pipeline.model)
+    rays = config.pipeline.datamanager.rays_per_batch + config.pipeline.model.unseen_rays()
     per_iteration = rays * side * SECONDS_PER_RAY_STEP
     if field.zerorf.enabled:  # a cubic box's canvases: the smallest multiple of 2^levels covering the final grid
         scale = 2**field.zerorf.upsample_levels

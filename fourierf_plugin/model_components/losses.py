@@ -1,5 +1,5 @@
 """Losses: photometric MSE, the grid regularisers (TV on planes/lines, density L1, TensoRF's normalisations) and
-the ray regularisers (depth smoothness, distortion).
+the ray regularisers (depth smoothness, distortion, entropy).
 
 The TV terms take the sum of squared differences as an argument: the reference below is plain autograd;
 ``fourierf_plugin.accel.tv`` gives the same values with a cheaper backward.
@@ -93,3 +93,20 @@ def distortion(weights: Tensor, s: Tensor) -> Tensor:
     pairwise = 2.0 * (wm * w_before - weights * wm_before).sum(dim=-1)
     own = (weights.square() * lengths).sum(dim=-1) / 3.0
     return (pairwise + own).mean()
+
+
+def ray_entropy(alpha: Tensor, accumulation: Tensor, threshold: float) -> Tensor:
+    """InfoNeRF's ray entropy in bits, summed over the rays whose accumulation exceeds ``threshold`` and divided by
+    all rays: ``-Σ_i p_i log2 p_i`` with ``p_i = α_i / Σ_j α_j`` the ray's opacity, normalised.
+
+    Why: a few-shot field explains each view with density spread along the ray (fog, floaters); the entropy is 0
+    when a ray's opacity sits in one sample and log2 N when it is even over N. Rays that hit nothing are left out, so
+    empty space is not pushed to gather an opaque sample. Only those rays enter the logarithm: a masked-out ray has
+    no gradient, not a NaN. 0 for no rays.
+    """
+    if alpha.shape[0] == 0:
+        return alpha.sum()
+    hit = alpha[accumulation > threshold]
+    p = hit / hit.sum(dim=-1, keepdim=True).clamp(min=1e-10)
+    entropy = -(p * torch.log2(p + 1e-10)).sum()
+    return entropy / alpha.shape[0]

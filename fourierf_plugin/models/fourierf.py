@@ -292,6 +292,9 @@ class FourieRFModel(nn.Module):
             out |= {"weights": weights, "t": samples.t}  # for loss_dict's distortion term: unseen patches skip it
         if self.training and self.effects.occlusion_regularization:
             out["occlusion"] = occlusion_penalty(sigma, self.config.occlusion_fraction, self.config.distance_scale)
+        if self.training and self.config.entropy_weight > 0:
+            alpha = -torch.expm1(-sigma * samples.deltas * self.config.distance_scale)
+            out["entropy"] = losses.ray_entropy(alpha, acc, self.config.entropy_threshold)
         return out
 
     def sample(self, origins: Tensor, directions: Tensor, jitter: torch.Generator | None = None) -> RaySamples:
@@ -333,6 +336,12 @@ class FourieRFModel(nn.Module):
         depth = self.forward(origins, directions, background, jitter)["depth"]
         return self.config.depth_smoothness_weight * losses.depth_smoothness(depth.view(-1, size, size))
 
+    def unseen_entropy(self, origins: Tensor, directions: Tensor, jitter: torch.Generator | None = None) -> Tensor:
+        """InfoNeRF's ray entropy, weighted, on rays [R, 3] from unseen poses: no photo charges the fog seen only
+        from between the cameras, this term does. ``jitter`` as for ``unseen_depth_smoothness``."""
+        background = torch.zeros(3, device=origins.device)
+        return self.config.entropy_weight * self.forward(origins, directions, background, jitter)["entropy"]
+
     def loss_dict(self, outputs: dict, target_rgba: Tensor, step: int) -> dict[str, Tensor]:
         """Photometric MSE plus the regularisers, all on this iteration's filtered grids."""
         target = composite_target(target_rgba, outputs["background"])
@@ -355,6 +364,8 @@ class FourieRFModel(nn.Module):
         if c.distortion_weight > 0 and "weights" in outputs:
             s = (outputs["t"] - self.near) / (self.far - self.near)
             out["distortion"] = c.distortion_weight * losses.distortion(outputs["weights"], s)
+        if c.entropy_weight > 0 and "entropy" in outputs:
+            out["entropy"] = c.entropy_weight * outputs["entropy"]
         return out
 
     @torch.no_grad()
@@ -539,6 +550,21 @@ class FourieRFModelConfig(InstantiateConfig):
     """Unseen-view patches per iteration (each costs size² extra rays)."""
     depth_smoothness_patch_size: int = 8
     """Side of an unseen-view patch in pixels."""
+    entropy_weight: float = 0.0
+    """Weight of InfoNeRF's ray entropy (InfoNeRF: 0.001) on the training rays and on ``entropy_unseen_rays`` rays
+    from poses between the training cameras, which pulls each ray's opacity into one sample; 0 = off."""
+    entropy_threshold: float = 0.1
+    """Rays whose accumulation is at most this are left out of the entropy (InfoNeRF: 0.1): they hit nothing."""
+    entropy_unseen_rays: int = 1024
+    """Rays from unseen poses per iteration for the entropy (InfoNeRF: 1024, as many as its training rays); 0 =
+    the training rays only."""
     cull_weight_threshold: float = 0.0
     """Training on a CPU: σ is read without gradients first, then with them only where the compositing weight exceeds
     this; other samples count as empty (ZeroRF's occlusion culling: 1e-4). 0 = off."""
+
+    def unseen_rays(self) -> int:
+        """Rays an iteration renders from unseen poses: depth smoothness's patches and the entropy's rays (none when
+        both are off)."""
+        patches = self.depth_smoothness_patches * self.depth_smoothness_patch_size**2
+        patches = patches if self.depth_smoothness_weight > 0 else 0
+        return patches + (self.entropy_unseen_rays if self.entropy_weight > 0 else 0)

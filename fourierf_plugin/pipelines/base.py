@@ -69,8 +69,8 @@ class Pipeline:
             step_generator=self.step_generator,
         ).to(device)
         self._generator = generator
-        # Unseen-view patches draw from a stream of their own: turning depth smoothness on changes the loss, not the
-        # training batches or their jitter.
+        # Unseen-view rays draw from a stream of their own: turning depth smoothness or the entropy on changes the
+        # loss, not the training batches or their jitter.
         self.unseen_generator = torch.Generator(device=self.step_generator.device).manual_seed(
             generator.initial_seed() + 2
         )
@@ -94,6 +94,12 @@ class Pipeline:
             loss_terms["depth_smoothness"] = self.model.unseen_depth_smoothness(
                 origins, directions, size, self.unseen_generator
             )
+        if config.entropy_weight > 0 and config.entropy_unseen_rays > 0:
+            with phase("data"):  # single-pixel patches: each ray from a pose of its own
+                origins, directions = self.datamanager.unseen_patches(
+                    config.entropy_unseen_rays, 1, self.unseen_generator
+                )
+            loss_terms["entropy_unseen"] = self.model.unseen_entropy(origins, directions, self.unseen_generator)
         with phase("losses"):
             loss = torch.stack(list(loss_terms.values())).sum()
         metrics = {k: v.detach() for k, v in loss_terms.items()}
@@ -144,7 +150,7 @@ class Pipeline:
         state = {"model": self.model.state_dict(), "datamanager": self.datamanager.state_dict()}
         if self.step_generator is not self._generator:
             state["step_generator"] = self.step_generator.get_state()
-        if self.model.config.depth_smoothness_weight > 0:
+        if self.model.config.unseen_rays() > 0:
             state["unseen_generator"] = self.unseen_generator.get_state()
         return state
 

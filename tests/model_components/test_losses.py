@@ -15,6 +15,7 @@ from fourierf_plugin.model_components.losses import (
     distortion,
     grid_tv,
     mse,
+    ray_entropy,
     total_variation_1d,
     total_variation_2d,
 )
@@ -169,3 +170,38 @@ def test_distortion_of_no_rays_is_zero_and_its_gradient_finite() -> None:
     weights = torch.full((4, 16), 1.0 / 16, requires_grad=True)
     distortion(weights, torch.linspace(0.0, 1.0, 16).expand(4, 16)).backward()
     assert weights.grad is not None and bool(torch.isfinite(weights.grad).all())
+
+
+def test_ray_entropy_is_zero_for_one_opaque_sample_and_log2_n_for_an_even_ray() -> None:
+    """Opacity in one sample: 0 bits; even over N samples: log2 N bits (α scaled alike: only the shape counts)."""
+    alpha = torch.zeros(2, 16, dtype=torch.float64)
+    alpha[0, 5] = 0.9
+    alpha[1] = 0.2
+    acc = torch.ones(2, dtype=torch.float64)
+    assert float(ray_entropy(alpha[:1], acc[:1], 0.1)) == pytest.approx(0.0, abs=1e-8)
+    assert float(ray_entropy(alpha[1:], acc[1:], 0.1)) == pytest.approx(4.0, rel=1e-8)
+    assert float(ray_entropy(alpha, acc, 0.1)) == pytest.approx(2.0, rel=1e-8)  # a mean over both rays
+
+
+def test_ray_entropy_leaves_out_rays_that_hit_nothing_and_divides_by_all() -> None:
+    alpha = torch.full((4, 8), 0.01, dtype=torch.float64)
+    acc = torch.tensor([0.5, 0.05, 0.1, 0.9], dtype=torch.float64)  # at the threshold counts as a miss
+    assert float(ray_entropy(alpha, acc, 0.1)) == pytest.approx(2 * 3.0 / 4, rel=1e-8)
+
+
+def test_ray_entropy_gradients_stay_finite_on_hard_rays() -> None:
+    """Empty rays, one-hot rays, rays with a single zero-opacity sample beside opaque ones and no rays at all."""
+    alpha = torch.zeros(4, 32)
+    alpha[1, 3] = 1.0
+    alpha[2, :31] = 1.0
+    alpha[3] = torch.linspace(0.0, 1.0, 32)
+    alpha.requires_grad_(True)
+    acc = torch.tensor([0.0, 1.0, 1.0, 1.0])
+    value = ray_entropy(alpha, acc, 0.1)
+    value.backward()
+    assert torch.isfinite(value) and alpha.grad is not None and bool(torch.isfinite(alpha.grad).all())
+    assert bool((alpha.grad[0] == 0).all())  # a miss has no gradient
+    empty = torch.zeros(0, 8, requires_grad=True)
+    nothing = ray_entropy(empty, torch.zeros(0), 0.1)
+    nothing.backward()
+    assert float(nothing.detach()) == 0.0 and empty.grad is not None

@@ -331,6 +331,9 @@ CASES: dict[str, Case] = {
     "train: negative depth-smoothness weight": out_of_range(f"{MODEL}.depth-smoothness-weight", "-1", ">= 0"),
     "train: negative distortion weight": out_of_range(f"{MODEL}.distortion-weight", "-0.01", ">= 0"),
     "train: zero depth-smoothness patches": out_of_range(f"{MODEL}.depth-smoothness-patches", "0", ">= 1"),
+    "train: negative entropy weight": out_of_range(f"{MODEL}.entropy-weight", "-0.001", ">= 0"),
+    "train: an entropy threshold past full opacity": out_of_range(f"{MODEL}.entropy-threshold", "1.5", "[0, 1]"),
+    "train: negative unseen rays for the entropy": out_of_range(f"{MODEL}.entropy-unseen-rays", "-3", ">= 0"),
     "train: floaters scaling from past the run": out_of_range(
         f"{MODEL}.floaters-gradient-scaling-from", "1.5", "[0, 1]"
     ),

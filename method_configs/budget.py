@@ -149,9 +149,9 @@ rest of its rule): fourierf-vm (density filtered on the image plane, ``REAL_DENS
 fourierf-vm at TV 2 read 20.02 and at TV 8 19.96 (seed 20211202). tensorf-vm with Floaters-No-More, in no rule, is
 indifferent (one thread, session 50: 20.58 -> 20.60, 3 seeds; test 19.93 either way). Longer runs keep TV 4
 (``REAL_TV_WEIGHT``): at 3000 iterations (P-MID, band open by step 800, without the revival) fourierf-vm's TV 6 read
-lower on seeds 1 and 2 (21.12 / 20.82 against 21.18 / 20.99); at 1500 (P-CPU's sizes, band open by step 800, the revival
-at once; seeds 20211202 and 1) fourierf-vm lost on both (20.36 / 20.21 -> 20.26 / 20.07) and tensorf-vm tied (20.22 /
-20.48 -> 20.38 / 20.37)."""
+lower on seeds 1 and 2 (21.12 / 20.82 against 21.18 / 20.99, both on an H100); at 1500 (P-CPU's sizes, band open by step
+800, the revival at once; seeds 20211202 and 1) fourierf-vm lost on both (20.36 / 20.21 -> 20.26 / 20.07) and tensorf-vm
+tied (20.22 / 20.48 -> 20.38 / 20.37)."""
 
 REAL_SHORT_TV_UP_TO = REAL_RAMP_ITERATIONS
 """The longest forward-facing run that gets ``REAL_SHORT_TV_WEIGHT``: 800 iterations, where it won for both methods
@@ -178,19 +178,19 @@ REAL_REVIVE_AT_ONCE_ABOVE = REAL_RAMP_ITERATIONS
 """Forward-facing scenes, both methods: a run longer than this revives a dark density field at its first dark batch
 (``revive_patience`` 1) instead of waiting 16 batches for a fresh field to come back by itself (the ReLU's default).
 At 800 iterations waiting won (``benchmarks/dead_start.py``, 64³: +0.27 dB val a seed over TensoRF's ReLU against
-+0.22 reviving at once; fern P-CPU seed 20211202 20.24 against 19.82); at 3000 (P-MID, 96³ -> 192³, 2048 rays)
-reviving at once won on each of three seeds (val, wait -> at once: seed 20211202, CPU, one thread, 21.13 -> 21.16,
-first recorded as 21.36 -> 21.66 without its threads; seeds 1 and 2, H100, 21.18 / 20.99 -> 21.41 / 21.33, with
-TensoRF's ReLU 21.32 / 21.24 and an earlier H100 run at once 21.63 / 21.47; at once on one CPU thread, session 58,
-21.88 / 20.94, the waiting runs not rerun), and at 1500 on P-CPU's 64³ -> 128³
++0.22 reviving at once; fern P-CPU seed 20211202 20.24 against 19.82); at 3000 (P-MID, 96³ -> 192³, 2048 rays,
+one CPU thread) reviving at once won 0.25 dB of mean val over three seeds (val, wait -> at once: seed 20211202 21.13 ->
+21.16, first recorded as 21.36 -> 21.66 without its threads; seeds 1 and 2 20.84 / 21.26 -> 21.88 / 20.94, sessions
+58 and 59, where an H100 had read 21.18 / 20.99 -> 21.41 / 21.33; the waiting runs revived on no batch, so they are
+TensoRF's ReLU), and at 1500 on P-CPU's 64³ -> 128³
 (19.92 -> 20.36, with the band open by step 800; with the band over the whole run waiting won, 20.74 against 20.40).
 The boundary is the one the band uses (``REAL_RAMP_ITERATIONS``): reviving at once pays where the band opens early.
 The CPU pairs as first recorded did not record their thread count; rerun on one thread, the pair on P-CPU's grid
-(session 49; 3000 iterations, seed 20211202) reads 21.44 -> 21.33, the revival acting on one batch, where it had
-been recorded as 20.94 -> 21.19, so the rule rests on P-MID's grid, the one a CPU run of fern gets by default; there
-the CPU seed's one-thread pair (sessions 51 and 52: revived on 3 batches, and on none while waiting) still favours
-it, if only by 0.03 dB val (test 20.27 -> 20.51), so the H100 seeds carry most of it. In tensorf-vm's runs it never
-acts there (P-CPU's grid at 3000, 3 seeds, and P-MID's CPU seed at TV 4: revived on 0 batches)."""
+(session 49; 3000 iterations, seed 20211202) reads 21.44 -> 21.33, the revival acting on one batch, where it had been
+recorded as 20.94 -> 21.19, so the rule rests on P-MID's grid, the one a CPU run of fern gets by default; there, all on
+one thread, it gains on two seeds of three and loses 0.32 dB val on seed 2 (test 20.32 -> 20.53 on the mean). In
+tensorf-vm's runs it never acts there (P-CPU's grid at 3000, 3 seeds, and P-MID's CPU seed at TV 4: revived on 0
+batches)."""
 
 
 REAL_OCCUPANCY_STEP = 200

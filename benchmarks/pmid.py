@@ -540,13 +540,13 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
             f"wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-ent{w}": [
                 *LEGO_COMP8, *first_band("0.05"), *RANDOM_AFTER_UPDATE, *entropy(w),
             ]
-            for w in ("0.00003", "0.0001", "0.0003", "0.001")
+            for w in ("0.00001", "0.00003", "0.0001", "0.0003", "0.001")
         },
         **{
             f"wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ent{w}": [
                 *LEGO_BGWARM, *entropy(w),
             ]
-            for w in ("0.00003", "0.0001", "0.0003", "0.001")
+            for w in ("0.00001", "0.00003", "0.0001", "0.0003", "0.001")
         },
         "wd0-nodecay-lr0.04-tv6-bgwarm": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_AFTER_UPDATE],
         # Session 32: TensoRF's TV need at P-HIGH's image and grid (TV 6 won at P-MID's, TV 4 at P-CPU's).

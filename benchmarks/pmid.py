@@ -757,11 +757,11 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         # Session 59: InfoNeRF's ray entropy on each method's P-CPU val choice, against the same ghosting.
         **{
             f"lr0.08-tvconst-tv6-alphamask0.25-zfree-ent{w}": [*fern_image_plane(6), *entropy(w)]
-            for w in ("0.0001", "0.001")
+            for w in ("0.00003", "0.0001", "0.001")
         },
         **{
             f"lr0.08-tvconst-tv6-fnm-alphamask0.25-ent{w}": [*fern_tv(6), *FNM, *OCCUPANCY_AT_STEP_200, *entropy(w)]
-            for w in ("0.0001", "0.001")
+            for w in ("0.00003", "0.0001", "0.001")
         },
         # ... and tensorf-vm's val choice under TensoRF's plain ReLU: its recorded rows (commit 71362f1) predate the
         # reviving ReLU, and a rerun under the current default read val 20.14 against the recorded 20.70. Plain reads

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import pytest
 import torch
 
 from fourierf_plugin.accel.ops import AcceleratedOps
@@ -39,9 +38,8 @@ def _step(trainer: Trainer, optimizer: torch.optim.Optimizer, step: int) -> dict
     return metrics
 
 
-@pytest.mark.parametrize("scene", ["blender", "llff"])
-def test_one_training_step_waits_for_the_device_at_most_twice(tmp_path: Path, scene: str, llff_scene: Path) -> None:
-    trainer = _trainer(TINY_SCENE if scene == "blender" else llff_scene, tmp_path, GPU_PATHS)
+def test_one_training_step_waits_for_the_device_at_most_twice(tmp_path: Path, either_scene: Path) -> None:
+    trainer = _trainer(either_scene, tmp_path, GPU_PATHS)
     model = trainer.pipeline.model
     assert isinstance(model.field.ops, AcceleratedOps) and not model.field.ops.gather  # grid_sample, FFT filters
     assert trainer.pipeline.step_generator is not model.generator  # per-step draws on the device's generator

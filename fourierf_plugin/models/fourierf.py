@@ -258,12 +258,14 @@ class FourieRFModel(nn.Module):
         directions: Tensor,
         background: Tensor | None = None,
         jitter: torch.Generator | None = None,
+        colour: bool = True,
     ) -> dict:
         """Render rays [R, 3] (unit directions; NDC directions as made): rgb [R, 3], accumulation and depth [R].
 
         In training mode samples are jittered (from ``jitter``, default the step generator) and the regularisers'
         inputs are returned too; in eval mode colours are clamped and, if the accel config says so, rays stop
-        marching once they are opaque.
+        marching once they are opaque. ``colour`` False renders geometry only (rgb is the background): the
+        unseen-view terms score depth and opacity, so decoding colours there would be wasted.
         """
         if background is None:
             kind = self._background_now if self.training else self.effects.eval_background
@@ -278,9 +280,11 @@ class FourieRFModel(nn.Module):
         with phase("compositing"):
             weights = composite_weights(sigma, samples.deltas, self.config.distance_scale)
         with phase("appearance"):
-            rgb = shade(
-                self.field.rgb, samples, weights, self.config.weight_threshold, self.effects.view_dependent, scale
-            )
+            rgb = weights.new_zeros(weights.shape[0], 3)
+            if colour:
+                rgb = shade(
+                    self.field.rgb, samples, weights, self.config.weight_threshold, self.effects.view_dependent, scale
+                )
         with phase("compositing"):
             acc = weights.sum(dim=-1)
             rgb = blend_background(rgb, acc, background)
@@ -333,14 +337,15 @@ class FourieRFModel(nn.Module):
         paints each photo from just in front of its camera leaves the depth torn between the views. ``jitter``: where
         the samples' jitter comes from (the pipeline keeps these draws off the training batches' stream)."""
         background = torch.zeros(3, device=origins.device)  # colour is not scored here: draw no coin for it
-        depth = self.forward(origins, directions, background, jitter)["depth"]
+        depth = self.forward(origins, directions, background, jitter, colour=False)["depth"]
         return self.config.depth_smoothness_weight * losses.depth_smoothness(depth.view(-1, size, size))
 
     def unseen_entropy(self, origins: Tensor, directions: Tensor, jitter: torch.Generator | None = None) -> Tensor:
         """InfoNeRF's ray entropy, weighted, on rays [R, 3] from unseen poses: no photo charges the fog seen only
         from between the cameras, this term does. ``jitter`` as for ``unseen_depth_smoothness``."""
         background = torch.zeros(3, device=origins.device)
-        return self.config.entropy_weight * self.forward(origins, directions, background, jitter)["entropy"]
+        entropy = self.forward(origins, directions, background, jitter, colour=False)["entropy"]
+        return self.config.entropy_weight * entropy
 
     def loss_dict(self, outputs: dict, target_rgba: Tensor, step: int) -> dict[str, Tensor]:
         """Photometric MSE plus the regularisers, all on this iteration's filtered grids."""

@@ -92,3 +92,13 @@ def test_on_an_object_with_a_background_it_warns(tmp_path: Path, capsys) -> None
 def test_on_forward_facing_photos_it_does_not_warn(llff_scene: Path, tmp_path: Path, capsys) -> None:
     pipeline_for(llff_scene, tmp_path, *ON)
     assert "depth smoothness on a scene with a background" not in capsys.readouterr().out
+
+
+def test_the_patches_decode_no_colour(llff_scene: Path, tmp_path: Path, monkeypatch) -> None:
+    """The patches are scored on their depth only: their render never calls the colour decoder."""
+    pipeline = pipeline_for(llff_scene, tmp_path, *ON)
+    model = pipeline.model
+    origins, directions = pipeline.datamanager.unseen_patches(3, 4, pipeline.unseen_generator)
+    model.prepare(0)
+    monkeypatch.setattr(model.field, "rgb", lambda *a, **k: pytest.fail("colour decoded for an unseen patch"))
+    assert torch.isfinite(model.unseen_depth_smoothness(origins, directions, 4))

@@ -67,3 +67,13 @@ def test_the_unseen_rays_are_counted_and_their_stream_is_checkpointed(tmp_path: 
     assert training_only.model.config.unseen_rays() == 0 and "unseen_generator" not in training_only.state_dict()
     _, metrics = training_only.train_step(0)
     assert "entropy" in metrics and "entropy_unseen" not in metrics
+
+
+def test_the_unseen_rays_decode_no_colour(tmp_path: Path, monkeypatch) -> None:
+    """The unseen rays are scored on their opacities only: their render never calls the colour decoder."""
+    pipeline = pipeline_for(TINY_SCENE, tmp_path, *ON)
+    model = pipeline.model
+    origins, directions = pipeline.datamanager.unseen_patches(16, 1, pipeline.unseen_generator)
+    model.prepare(0)
+    monkeypatch.setattr(model.field, "rgb", lambda *a, **k: pytest.fail("colour decoded for an unseen ray"))
+    assert torch.isfinite(model.unseen_entropy(origins, directions))

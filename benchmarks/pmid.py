@@ -549,6 +549,10 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
             for w in ("0.00001", "0.00003", "0.0001", "0.0003", "0.001")
         },
         "wd0-nodecay-lr0.04-tv6-bgwarm": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_AFTER_UPDATE],
+        # Session 60: the entropy at P-CPU's val-chosen weight on tensorf-vm's P-MID choice (fourierf-vm's P-MID choice
+        # with it is above).
+        "wd0-nodecay-lr0.04-tv6-bgwarm-ent0.00003": [
+            *RULE_LEGO, *tv_weights(6.0), *RANDOM_AFTER_UPDATE, *entropy("0.00003")],
         # Session 32: TensoRF's TV need at P-HIGH's image and grid (TV 6 won at P-MID's, TV 4 at P-CPU's).
         # Session 33: TV 14, past TV 10 where TensoRF's val still rose, on the same 300³ grid (pmid300). Session 35:
         # TV 12 at P-HIGH (its val rose to TV 10 there), with fourierf-vm's TV 8 below, so both searches are two-sided.

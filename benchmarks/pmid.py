@@ -360,9 +360,10 @@ def distortion(weight: str) -> list[str]:
     return ["--pipeline.model.distortion-weight", weight]
 
 
-def entropy(weight: str) -> list[str]:
-    """InfoNeRF's ray entropy at ``weight`` on the training rays and 1024 rays from unseen poses."""
-    return ["--pipeline.model.entropy-weight", weight]
+def entropy(weight: str, unseen_rays: int | None = None) -> list[str]:
+    """InfoNeRF's ray entropy at ``weight`` on the training rays and ``unseen_rays`` (default 1024) unseen rays."""
+    rays = [] if unseen_rays is None else ["--pipeline.model.entropy-unseen-rays", str(unseen_rays)]
+    return ["--pipeline.model.entropy-weight", weight, *rays]
 
 
 TV_LOW = tv_weights(0.1)
@@ -547,6 +548,18 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
                 *LEGO_BGWARM, *entropy(w),
             ]
             for w in ("0.00001", "0.00003", "0.0001", "0.0003", "0.001")
+        },
+        # Session 60: how many unseen rays the entropy at 0.00003 scores (1024 above, InfoNeRF's; 0 = training rays
+        # only), on each method's P-CPU val choice.
+        **{
+            f"wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-ent0.00003-u{n}": [
+                *LEGO_COMP8, *first_band("0.05"), *RANDOM_AFTER_UPDATE, *entropy("0.00003", n),
+            ]
+            for n in (0, 256, 4096)
+        },
+        **{
+            f"wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ent0.00003-u{n}": [*LEGO_BGWARM, *entropy("0.00003", n)]
+            for n in (0, 256, 4096)
         },
         "wd0-nodecay-lr0.04-tv6-bgwarm": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_AFTER_UPDATE],
         # Session 60: the entropy at P-CPU's val-chosen weight on tensorf-vm's P-MID choice (fourierf-vm's P-MID choice

@@ -6,6 +6,10 @@ sides run in this one invocation on this machine, alternating which goes first i
 
     python benchmarks/ab_speed.py --old HEAD            # the working tree against the last commit, 3 pairs
     python benchmarks/ab_speed.py --old abc123 --new def456 --pairs 5
+    python benchmarks/ab_speed.py --old HEAD --new HEAD --new-flags "--pipeline.model.entropy-weight 0.00003"
+
+The last form times an option rather than a change: one version, the new side trained with extra flags (each side's
+flags go before the data parser's), reported in a section of its own so the last default change's A/B stays.
 
 P-CPU: lego 4 views (r_27 r_76 r_97 r_99), 100×100, batch 1024, grid 64³ → 128³, 800 iterations, the official code's
 optimiser (weight decay 0, no lr decay), 25 test views; or, with ``--scene fern``, fern 3 views at images_8 on the same
@@ -26,7 +30,8 @@ import shutil
 import statistics
 import subprocess
 import sys
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from fourierf_plugin.bench.phases import elapsed_by_step, read_metrics
@@ -53,6 +58,11 @@ class Scene:
     @property
     def name(self) -> str:
         return Path(self.data).name
+
+    def for_option(self) -> Scene:
+        """The same scene, reporting into a section of its own: an option's cost, not a change to a default."""
+        return replace(self, title=f"Cost of an option on P-CPU {self.name} (interleaved A/B of flags)",
+                       marker=f"{self.marker}_option")  # fmt: skip
 
     @property
     def begin(self) -> str:
@@ -145,8 +155,11 @@ def revision_label(rev: str | None) -> str:
     return f"the working tree on {head}" + (", with uncommitted changes" if dirty else "")
 
 
-def run_side(code: Path, label: str, seed: int, work: Path, shared: Path, scene: Scene) -> dict:
-    """Train and evaluate one P-CPU run of ``scene`` with the package in ``code``; its timings and PSNR."""
+def run_side(
+    code: Path, label: str, seed: int, work: Path, shared: Path, scene: Scene, flags: Sequence[str] = ()
+) -> dict:
+    """Train and evaluate one P-CPU run of ``scene`` with the package in ``code`` and the side's own ``flags``; its
+    timings and PSNR."""
     env = dict(os.environ, PYTHONPATH=str(code))
     out = work / "runs" / label
     shutil.rmtree(out, ignore_errors=True)
@@ -154,7 +167,7 @@ def run_side(code: Path, label: str, seed: int, work: Path, shared: Path, scene:
         sys.executable, "-P", "-m", "fourierf_plugin.scripts.train", "fourierf-vm",
         "--data", str(shared / "data" / scene.data), "--output-dir", str(out), "--timestamp", "run",
         "--seed", str(seed), "--max-num-iterations", "800",
-        "--log-every", "50", *GRID_FLAGS, *scene.flags, *scene.parser,
+        "--log-every", "50", *GRID_FLAGS, *scene.flags, *flags, *scene.parser,
     ]  # fmt: skip
     wall, _, code_ = run_timed(train, work / f"{label}.train.log", env)
     if code_ != 0:
@@ -239,6 +252,8 @@ def write_report(work: Path, markdown: Path) -> list[str]:
     timings = json.loads((work / "iterations.json").read_text())
     meta = json.loads((work / "meta.json").read_text())
     scene = SCENES[meta.get("scene", "lego")]  # records before --scene were lego's
+    if meta.get("old_flags") or meta.get("new_flags"):
+        scene = scene.for_option()
     lines = summary(rows, timings, meta)
     body = section_head(scene.title, meta["command"])
     update_benchmarks_md(markdown, scene.begin, scene.end, [*body, *lines, ""])
@@ -250,6 +265,8 @@ def main() -> None:
     ap.add_argument("--old", default="HEAD", help="git revision of the baseline")
     ap.add_argument("--new", default=None, help="git revision to compare (default: the working tree)")
     ap.add_argument("--describe", default="", help="what differs between the sides (goes into BENCHMARKS.md)")
+    ap.add_argument("--old-flags", default="", help="training flags of the old side only (one string)")
+    ap.add_argument("--new-flags", default="", help="training flags of the new side only (one string)")
     ap.add_argument("--pairs", type=int, default=3)
     ap.add_argument("--seeds", type=int, nargs="+", default=[20211202, 1, 2])
     ap.add_argument("--shared", type=Path, default=REPO.parent / "shared")
@@ -266,14 +283,17 @@ def main() -> None:
         print("\n".join(write_report(args.work, args.markdown)))
         return
     args.work.mkdir(parents=True, exist_ok=True)
-    labels = {"old": revision_label(args.old), "new": revision_label(args.new)}
+    flags = {"old": shlex.split(args.old_flags), "new": shlex.split(args.new_flags)}
+    labels = {side: revision_label(rev) + (f" + {shlex.join(flags[side])}" if flags[side] else "")
+              for side, rev in (("old", args.old), ("new", args.new))}  # fmt: skip
     codes = {"old": export_tree(args.old, args.work / "code-old"), "new": export_tree(args.new, args.work / "code-new")}
     rows = []
     for i in range(args.pairs):
         seed = args.seeds[i % len(args.seeds)]
         order = ("old", "new") if i % 2 == 0 else ("new", "old")
         for side in order:
-            row = run_side(codes[side], f"{side}-{i}", seed, args.work, args.shared, scene) | {"side": side}
+            row = run_side(codes[side], f"{side}-{i}", seed, args.work, args.shared, scene, flags[side])
+            row |= {"side": side}
             rows.append(row)
             print(json.dumps(row), flush=True)
     (args.work / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
@@ -287,6 +307,7 @@ def main() -> None:
     (args.work / "iterations.json").write_text(json.dumps(timings))
     meta = {
         "old": labels["old"], "new": labels["new"], "describe": args.describe, "pairs": args.pairs, "scene": args.scene,
+        "old_flags": flags["old"], "new_flags": flags["new"],
         "seeds": [args.seeds[i % len(args.seeds)] for i in range(args.pairs)],
         "command": "python benchmarks/ab_speed.py " + shlex.join(sys.argv[1:]),
     }  # fmt: skip

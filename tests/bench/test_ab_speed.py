@@ -90,3 +90,18 @@ def test_each_scene_reports_into_its_own_section(ab_speed: ModuleType, tmp_path:
     text = markdown.read_text()
     assert "lego A/B" not in text and lego.title in text and fern.title in text
     assert (lego.begin, lego.end) == (ab_speed.BEGIN, ab_speed.END), "the lego section keeps its markers"
+
+
+def test_an_option_ab_reports_into_its_own_section(ab_speed: ModuleType, tmp_path: Path) -> None:
+    """Timing an option's flags must not overwrite the A/B of the last change to a default."""
+    (tmp_path / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in _rows()))
+    (tmp_path / "iterations.json").write_text(json.dumps({"old": [0.2], "new": [0.1]}))
+    (tmp_path / "meta.json").write_text(json.dumps(META | {"old_flags": [], "new_flags": ["--x", "1"]}))
+    lego = ab_speed.SCENES["lego"]
+    option = lego.for_option()
+    markdown = tmp_path / "BENCHMARKS.md"
+    markdown.write_text(f"{lego.begin}\nlego A/B\n{lego.end}\n")
+    ab_speed.write_report(tmp_path, markdown)
+    text = markdown.read_text()
+    assert "lego A/B" in text and option.title in text and "| 90.0 | 80.0 | 0.89 |" in text
+    assert option.begin in text and option.end in text and option.marker != lego.marker

@@ -277,13 +277,16 @@ def main() -> None:
     ap.add_argument("--report", action="store_true", help="only rewrite BENCHMARKS.md from the A/B recorded in --work")
     args = ap.parse_args()
     scene = SCENES[args.scene]
+    try:
+        flags = {"old": shlex.split(args.old_flags), "new": shlex.split(args.new_flags)}
+    except ValueError as err:
+        ap.error(f"--old-flags / --new-flags: {err}; quote each side's flags as one shell string")
     if args.work is None:
         args.work = REPO / "outputs" / ("bench_ab_speed" if args.scene == "lego" else f"bench_ab_speed_{args.scene}")
     if args.report:
         print("\n".join(write_report(args.work, args.markdown)))
         return
     args.work.mkdir(parents=True, exist_ok=True)
-    flags = {"old": shlex.split(args.old_flags), "new": shlex.split(args.new_flags)}
     labels = {side: revision_label(rev) + (f" + {shlex.join(flags[side])}" if flags[side] else "")
               for side, rev in (("old", args.old), ("new", args.new))}  # fmt: skip
     codes = {"old": export_tree(args.old, args.work / "code-old"), "new": export_tree(args.new, args.work / "code-new")}

@@ -105,3 +105,13 @@ def test_an_option_ab_reports_into_its_own_section(ab_speed: ModuleType, tmp_pat
     text = markdown.read_text()
     assert "lego A/B" in text and option.title in text and "| 90.0 | 80.0 | 0.89 |" in text
     assert option.begin in text and option.end in text and option.marker != lego.marker
+
+
+def test_unbalanced_side_flags_are_one_clear_error(tmp_path: Path) -> None:
+    done = subprocess.run(
+        [sys.executable, str(SCRIPT), "--new-flags", '--x "1', "--work", str(tmp_path / "w")],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert "--old-flags / --new-flags" in done.stderr and not (tmp_path / "w").exists()

@@ -37,6 +37,7 @@ from scipy import ndimage
 from skimage.measure import marching_cubes
 from torch import Tensor
 
+from fourierf_plugin.model_components.rendering import opacity_from_density
 from fourierf_plugin.utils.errors import UserError, fail
 from fourierf_plugin.utils.memory import available_memory, check_fits
 
@@ -197,11 +198,6 @@ def sample_grid(
                 raise ValueError(f"fn must map [N, 3] points to [N] values, got shape {tuple(values.shape)}")
             out[start : start + idx.shape[0]] = values.detach().float().cpu()
     return out.view(*reso).numpy()
-
-
-def opacity_from_density(sigma: Tensor, step_size: float, distance_scale: float) -> Tensor:
-    """α = 1 − exp(−σ·δ·distance_scale): the alpha of one ray sample (``expm1`` keeps small σ exact)."""
-    return -torch.expm1(-sigma * (step_size * distance_scale))
 
 
 def auto_levels(level_kind: LevelKind, step_size: float, distance_scale: float) -> list[float]:

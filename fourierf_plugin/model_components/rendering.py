@@ -10,6 +10,11 @@ import torch
 from torch import Tensor
 
 
+def opacity_from_density(sigma: Tensor, step_size: Tensor | float, distance_scale: float = 1.0) -> Tensor:
+    """α = 1 − exp(−σ·δ·distance_scale): the alpha of one ray sample (``expm1`` keeps small σ exact)."""
+    return -torch.expm1(-sigma * (step_size * distance_scale))
+
+
 def composite_weights(sigma: Tensor, deltas: Tensor, distance_scale: float = 1.0) -> Tensor:
     """Per-sample weights [R, N] = α_k T_k, with α_k = 1 - exp(-τ_k), T_k = exp(-Σ_{j<k} τ_j), τ = s σ δ.
 

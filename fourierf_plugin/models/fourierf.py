@@ -46,6 +46,7 @@ from fourierf_plugin.model_components.rendering import (
     composite_target,
     composite_weights,
     expected_depth,
+    opacity_from_density,
 )
 from fourierf_plugin.utils.console import get_console
 from fourierf_plugin.utils.phases import phase
@@ -297,7 +298,7 @@ class FourieRFModel(nn.Module):
         if self.training and self.effects.occlusion_regularization:
             out["occlusion"] = occlusion_penalty(sigma, self.config.occlusion_fraction, self.config.distance_scale)
         if self.training and self.config.entropy_weight > 0:
-            alpha = -torch.expm1(-sigma * samples.deltas * self.config.distance_scale)
+            alpha = opacity_from_density(sigma, samples.deltas, self.config.distance_scale)
             out["entropy"] = losses.ray_entropy(alpha, acc, self.config.entropy_threshold)
         return out
 
@@ -436,7 +437,7 @@ class FourieRFModel(nn.Module):
             keep = self.occupancy.query(pts)
             if keep.any():
                 sigma = self.field.density(pts[keep])
-                alpha[i : i + chunk][keep] = -torch.expm1(-sigma * step)
+                alpha[i : i + chunk][keep] = opacity_from_density(sigma, step)
         return alpha.view(*reso)
 
     def _update_occupancy(self, shrink: bool, step: int) -> None:

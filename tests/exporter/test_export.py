@@ -27,7 +27,6 @@ from fourierf_plugin.exporter.marching_cubes import (
     export_field_mesh,
     extract_mesh,
     largest_piece_share,
-    opacity_from_density,
     remove_small_components,
     sample_grid,
     solid_level,
@@ -35,6 +34,7 @@ from fourierf_plugin.exporter.marching_cubes import (
     write_mesh,
 )
 from fourierf_plugin.method_configs import config_registry
+from fourierf_plugin.model_components.rendering import opacity_from_density
 from fourierf_plugin.scripts import export as export_script
 from fourierf_plugin.scripts.cli import EXIT_USER_ERROR
 from fourierf_plugin.utils.errors import UserError

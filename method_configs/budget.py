@@ -6,7 +6,8 @@ and by TensoRF alike, without the paper's weight decay 0.2 and without TensoRF's
 optimiser), at a grid lr 0.04, with TV 4 on the planes (``OBJECT_TV_WEIGHT``; lego val, the preset's -> the
 rule's: FourieRF 21.30 -> 22.57 at 800 iterations, 20.34 -> 22.48 at 3000; TensoRF 21.41 -> 22.62, 20.50 -> 21.74)
 and with half TensoRF's components (``OBJECT_COMPONENTS``); where its images carry alpha, on a random background from
-the first occupancy update on (``OBJECT_RANDOM_BACKGROUND_FROM``).
+the first occupancy update on (``OBJECT_RANDOM_BACKGROUND_FROM``); and with InfoNeRF's ray entropy
+(``OBJECT_ENTROPY_WEIGHT``).
 A forward-facing scene wants a 4x grid learning rate (TensoRF's 0.02 is tuned for 25k iterations: fern val 18.91 ->
 19.33 at 800, 18.27 -> 19.97 at 3000; tensorf-vm likewise) and a constant TV weight on the planes, 6 in a run of up to
 800 iterations (``REAL_SHORT_TV_WEIGHT``) and 4 in a longer one (``REAL_TV_WEIGHT``), both methods alike, and FourieRF,
@@ -84,6 +85,23 @@ with smooth density, which the random background clears, and won at 800 iteratio
 30's rule) but lost at every longer budget (3 seeds each: 1500 23.57 -> 23.29, 3000 23.39 -> 23.19, P-MID 22.88 ->
 22.80), where the paper's band is level with tensorf-vm or ahead of it (1500: 23.45, 3000: 23.43, P-MID at TV 6:
 22.83)."""
+
+OBJECT_ENTROPY_WEIGHT = 0.00003
+"""Object runs of ``OBJECT_ENTROPY_FROM`` iterations or more, both methods: InfoNeRF's ray entropy at this weight
+(``--pipeline.model.entropy-weight``, on the training rays and on 1024 rays an iteration from poses between the training
+cameras; InfoNeRF's own 0.001 lost 1.4 dB val on lego, one seed), so fog and doubled geometry that no photo charges
+cost. Lego val, mean of 3 seeds, off -> on: 800 iterations (P-CPU) on the rest of the rule fourierf-vm 23.13 -> 23.20
+(higher on every seed; test 22.98 -> 23.17; on its val choice, a first band of 0.05, 23.24 -> 23.43), tensorf-vm 23.25
+-> 23.27 (test 23.08 -> 23.21); 3000 iterations (P-MID) fourierf-vm 22.88 -> 22.97 (test 22.78 -> 23.09), tensorf-vm
+at its TV 6 22.83 -> 23.02 (test 22.73 -> 23.04). It lifts both methods at both budgets, so, like the rest of the
+object rule, it is theirs alike. It costs 1.07x the time
+of a P-CPU run (``benchmarks/ab_speed.py --new-flags``, 3 interleaved pairs; BENCHMARKS.md). Forward-facing scenes go
+without it: on fern (P-CPU, one seed) it lowered both methods at every weight tried (0.00003: fourierf-vm 20.51 ->
+20.09, tensorf-vm 20.04 -> 19.94)."""
+
+OBJECT_ENTROPY_FROM = 800
+"""Object runs this long or longer get ``OBJECT_ENTROPY_WEIGHT``: measured at 800 and 3000 iterations only; shorter
+runs, tests and previews go without it."""
 
 BACKGROUND_PATH = "pipeline.effects.background"
 
@@ -242,9 +260,15 @@ def density_axes(scene_preset: str, iterations: int) -> tuple[int, ...] | None:
     return REAL_DENSITY_AXES if scene_preset == "real" and iterations <= REAL_DENSITY_AXES_UP_TO else None
 
 
+def _object_run_from(scene_preset: str, iterations: int, start: int) -> bool:
+    """Whether a run is an object's and at least ``start`` iterations long: the object rule's parts each begin where
+    they were measured."""
+    return scene_preset == "synthetic" and iterations >= start
+
+
 def object_components(scene_preset: str, iterations: int) -> dict[str, Any]:
     """The rule's component counts (none: the preset's): half TensoRF's for an object run of 800 iterations or more."""
-    if scene_preset != "synthetic" or iterations < OBJECT_COMPONENTS_FROM:
+    if not _object_run_from(scene_preset, iterations, OBJECT_COMPONENTS_FROM):
         return {}
     density, appearance = OBJECT_COMPONENTS
     return {
@@ -257,9 +281,16 @@ def object_background(scene_preset: str, iterations: int, background: str) -> di
     """The rule's random training background (none: the declared one) for an object run of
     ``OBJECT_RANDOM_BACKGROUND_FROM`` iterations or more whose scene declares white (``background``: its images carry
     alpha and are scored on white, which the random background's warm-up and its renders use; the one case measured)."""
-    if scene_preset != "synthetic" or iterations < OBJECT_RANDOM_BACKGROUND_FROM or background != "white":
+    if not _object_run_from(scene_preset, iterations, OBJECT_RANDOM_BACKGROUND_FROM) or background != "white":
         return {}
     return {BACKGROUND_PATH: "random"}
+
+
+def object_entropy(scene_preset: str, iterations: int) -> dict[str, Any]:
+    """The rule's ray entropy (none: off) for an object run of ``OBJECT_ENTROPY_FROM`` iterations or more."""
+    if not _object_run_from(scene_preset, iterations, OBJECT_ENTROPY_FROM):
+        return {}
+    return {"pipeline.model.entropy_weight": OBJECT_ENTROPY_WEIGHT}
 
 
 def short_run_settings(method: str, scene_preset: str, iterations: int, background: str = "white") -> dict[str, Any]:
@@ -268,7 +299,7 @@ def short_run_settings(method: str, scene_preset: str, iterations: int, backgrou
     if iterations >= PAPER_ITERATIONS or (method, scene_preset) not in SHORT_RUN_SETTINGS:
         return {}
     settings = SHORT_RUN_SETTINGS[(method, scene_preset)] | object_components(scene_preset, iterations)
-    settings |= object_background(scene_preset, iterations, background)
+    settings |= object_background(scene_preset, iterations, background) | object_entropy(scene_preset, iterations)
     short_tv = real_tv_weight(scene_preset, iterations)
     if short_tv is not None:
         settings |= _tv(short_tv)

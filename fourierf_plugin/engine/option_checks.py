@@ -100,7 +100,7 @@ RULES: tuple[Rule, ...] = (
     Rule(f"{_MODEL}.occlusion_weight", at_least(0.0), "a weight >= 0", "0.01"),
     Rule(f"{_MODEL}.depth_smoothness_weight", at_least(0.0), "a weight >= 0 (0 = off)", "0.1"),
     Rule(f"{_MODEL}.distortion_weight", at_least(0.0), "a weight >= 0 (0 = off)", "0.01"),
-    Rule(f"{_MODEL}.entropy_weight", at_least(0.0), "a weight >= 0 (0 = off)", "0.001"),
+    Rule(f"{_MODEL}.entropy_weight", at_least(0.0), "a weight >= 0 (0 = off)", "0.00003"),
     Rule(f"{_MODEL}.entropy_threshold", within(0.0, 1.0), "an accumulation in [0, 1]", "0.1"),
     Rule(f"{_MODEL}.entropy_unseen_rays", int_at_least(0), "an integer >= 0 (0 = the training rays only)", "1024"),
     Rule(f"{_MODEL}.depth_smoothness_patches", int_at_least(1), "an integer >= 1", "4"),

@@ -12,6 +12,8 @@ from fourierf_plugin.method_configs import all_methods, finalize
 from fourierf_plugin.method_configs.budget import (
     OBJECT_COMPONENTS,
     OBJECT_COMPONENTS_FROM,
+    OBJECT_ENTROPY_FROM,
+    OBJECT_ENTROPY_WEIGHT,
     OBJECT_RANDOM_BACKGROUND_FROM,
     OBJECT_TV_WEIGHT,
     PAPER_ITERATIONS,
@@ -47,12 +49,13 @@ def test_rule_is_a_function_of_the_iteration_count() -> None:
     short |= {
         "pipeline.model.field.density_components": (density,) * 3,
         "pipeline.model.field.appearance_components": (appearance,) * 3,
+        "pipeline.model.entropy_weight": OBJECT_ENTROPY_WEIGHT,
     }
     random = {"pipeline.effects.background": "random"}
     assert short_run_settings("tensorf-vm", "synthetic", PAPER_ITERATIONS - 1) == short | random, "masks off"
     assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS - 1) == short | random, "the paper's band"
     assert short_run_settings("fourierf-vm", "synthetic", OBJECT_RANDOM_BACKGROUND_FROM) == short | random
-    assert OBJECT_RANDOM_BACKGROUND_FROM == OBJECT_COMPONENTS_FROM
+    assert OBJECT_RANDOM_BACKGROUND_FROM == OBJECT_COMPONENTS_FROM == OBJECT_ENTROPY_FROM
     assert short_run_settings("fourierf-vm", "synthetic", 3000, "none") == short, "photos: no alpha, no random colour"
     assert short_run_settings("tensorf-vm", "synthetic", 3000, "none") == short
     assert short_run_settings("fourierf-vm", "synthetic", 3000, "black") == short, "scored on black: not measured"
@@ -107,12 +110,26 @@ def test_an_object_run_trains_on_a_random_background_with_the_papers_band() -> N
     assert (model.fourier.f0_density, model.fourier.f0_color) == (paper.f0_density, paper.f0_color) == (0.3, 0.3)
     assert config.pipeline.effects.background == "random", "the scene declares white: its images carry alpha"
     assert model.random_background_from is None, "random from the step after the first occupancy update, white before"
-    assert any(n.startswith("budget rule") and "background=random;" in n for n in notes)
+    assert any(n.startswith("budget rule") and "background=random" in n for n in notes)
     assert not any("f0_density" in n for n in notes), "the narrow band lost from 1500 iterations on"
     tensorf, _ = finished("tensorf-vm", TINY_SCENE)
     assert tensorf.pipeline.effects.background == "random", "the same background, masks off"
     short, _ = finished("fourierf-vm", TINY_SCENE, "--max-num-iterations", str(OBJECT_RANDOM_BACKGROUND_FROM - 1))
     assert short.pipeline.effects.background == "white"
+
+
+@pytest.mark.parametrize("method", ["fourierf-vm", "tensorf-vm"])
+def test_an_object_run_scores_the_ray_entropy_and_a_shorter_one_does_not(method: str) -> None:
+    config, notes = finished(method, TINY_SCENE)
+    assert config.max_num_iterations >= OBJECT_ENTROPY_FROM
+    assert all_methods[method].pipeline.model.entropy_weight == 0.0, "the preset has it off"
+    assert config.pipeline.model.entropy_weight == OBJECT_ENTROPY_WEIGHT > 0
+    assert any(n.startswith("budget rule") and f"entropy_weight={OBJECT_ENTROPY_WEIGHT}" in n for n in notes)
+    short, _ = finished(method, TINY_SCENE, "--max-num-iterations", str(OBJECT_ENTROPY_FROM - 1))
+    assert short.pipeline.model.entropy_weight == 0.0, "measured from 800 iterations up"
+    mine, notes = finished(method, TINY_SCENE, "--pipeline.model.entropy-weight", "0")
+    assert mine.pipeline.model.entropy_weight == 0.0, "a flag wins, also one that turns it off"
+    assert any("kept your pipeline.model.entropy_weight" in n for n in notes)
 
 
 @pytest.mark.parametrize("background", ["white", "black"])
@@ -175,6 +192,7 @@ def test_forward_facing_short_run_gets_the_faster_grid_rate_and_constant_tv(llff
     assert config.optimizer.lr_grids == 0.08
     model = config.pipeline.model
     assert model.tv_decay_ratio == 1.0 and model.tv_weight_density == model.tv_weight_appearance == REAL_TV_WEIGHT
+    assert model.entropy_weight == 0.0, "the ray entropy lowered both methods on fern"
     long_run, _ = finished(method, llff_scene, "--max-num-iterations", str(PAPER_ITERATIONS + 2000))
     assert long_run.optimizer.lr_grids == 0.02
     assert long_run.pipeline.model.tv_weight_density == long_run.pipeline.model.tv_weight_appearance == 1.0

@@ -24,7 +24,12 @@ from fourierf_plugin.data.parsers.llff import LLFF_DECLARATION, LLFFDataParserCo
 from fourierf_plugin.data.scene_effects import EffectsConfig, SceneEffects
 from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.method_configs import all_methods, config_registry, finalize, resume_config
-from fourierf_plugin.method_configs.budget import OBJECT_COMPONENTS, OBJECT_TV_WEIGHT, short_run_settings
+from fourierf_plugin.method_configs.budget import (
+    OBJECT_COMPONENTS,
+    OBJECT_ENTROPY_WEIGHT,
+    OBJECT_TV_WEIGHT,
+    short_run_settings,
+)
 from fourierf_plugin.method_configs.finalize import ignored_on_resume
 from fourierf_plugin.method_configs.scene_presets import (
     REAL_SCENE_SETTINGS,
@@ -61,8 +66,8 @@ def without_decisions(config: TrainerConfig) -> dict:
     data["pipeline"]["model"]["field"].pop("n_voxels_final")
     data["pipeline"]["model"]["field"].pop("density_components")
     data["pipeline"]["model"]["field"].pop("appearance_components")
-    for tv in ("tv_decay_ratio", "tv_weight_density", "tv_weight_appearance"):
-        data["pipeline"]["model"].pop(tv)
+    for decided in ("tv_decay_ratio", "tv_weight_density", "tv_weight_appearance", "entropy_weight"):
+        data["pipeline"]["model"].pop(decided)
     data["pipeline"]["model"]["fourier"].pop("ramp_fraction")
     data["optimizer"].pop("weight_decay")
     data["optimizer"].pop("lr_grids")
@@ -93,7 +98,7 @@ def test_blender_scene_keeps_the_synthetic_preset_and_gets_its_declared_effects(
         "budget rule (800 < 10000 iterations): weight_decay=0.0, lr_decay_ratio=1.0, lr_grids=0.04, "
         f"tv_weight_density={OBJECT_TV_WEIGHT}, tv_weight_appearance={OBJECT_TV_WEIGHT}, "
         f"density_components={(OBJECT_COMPONENTS[0],) * 3}, appearance_components={(OBJECT_COMPONENTS[1],) * 3}, "
-        "background=random;"
+        f"background=random, entropy_weight={OBJECT_ENTROPY_WEIGHT};"
     )
     declared = "(the scene declares: background=white, rays=euclidean, view-dependent=no, occlusion-regularisation=no, "
     assert notes[2] == (

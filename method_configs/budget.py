@@ -92,12 +92,12 @@ OBJECT_ENTROPY_WEIGHT = 0.00003
 cameras; InfoNeRF's own 0.001 lost 1.4 dB val on lego, one seed), so fog and doubled geometry that no photo charges
 cost. Lego val, mean of 3 seeds, off -> on: 800 iterations (P-CPU) on the rest of the rule fourierf-vm 23.13 -> 23.20
 (higher on every seed; test 22.98 -> 23.17; on its val choice, a first band of 0.05, 23.24 -> 23.43), tensorf-vm 23.25
--> 23.27 (test 23.08 -> 23.21); 3000 iterations (P-MID) fourierf-vm 22.88 -> 22.97 (test 22.78 -> 23.09), tensorf-vm
-at its TV 6 22.83 -> 23.02 (test 22.73 -> 23.04). It lifts both methods at both budgets, so, like the rest of the
-object rule, it is theirs alike. It costs 1.07x the time
-of a P-CPU run (``benchmarks/ab_speed.py --new-flags``, 3 interleaved pairs; BENCHMARKS.md). Forward-facing scenes go
-without it: on fern (P-CPU, one seed) it lowered both methods at every weight tried (0.00003: fourierf-vm 20.51 ->
-20.09, tensorf-vm 20.04 -> 19.94)."""
+-> 23.27 (test 23.08 -> 23.21); 3000 iterations (P-MID) fourierf-vm 22.88 -> 22.97 (test 22.78 -> 23.09), tensorf-vm at
+its TV 6 22.83 -> 23.02 (test 22.73 -> 23.04). It lifts both methods at both budgets, so, like the rest of the object
+rule, it is theirs alike. A P-CPU run of fourierf-vm takes 1.21x as long (``benchmarks/ab_speed.py``, the rule without
+and with it, 2 interleaved pairs: final phase 1.10x, a step at 700 in-process 1.17x; BENCHMARKS.md; an A/B of the option
+in session 60, 3 pairs, read 1.07x, 1.09x and 1.16x). Forward-facing scenes go without it: on fern (P-CPU, one seed) it
+lowered both methods at every weight tried (0.00003: fourierf-vm 20.51 -> 20.09, tensorf-vm 20.04 -> 19.94)."""
 
 OBJECT_ENTROPY_FROM = 800
 """Object runs this long or longer get ``OBJECT_ENTROPY_WEIGHT``: measured at 800 and 3000 iterations only; shorter

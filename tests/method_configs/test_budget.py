@@ -110,7 +110,8 @@ def test_an_object_run_trains_on_a_random_background_with_the_papers_band() -> N
     assert (model.fourier.f0_density, model.fourier.f0_color) == (paper.f0_density, paper.f0_color) == (0.3, 0.3)
     assert config.pipeline.effects.background == "random", "the scene declares white: its images carry alpha"
     assert model.random_background_from is None, "random from the step after the first occupancy update, white before"
-    assert any(n.startswith("budget rule") and "background=random" in n for n in notes)
+    rule_note = f"background=random, entropy_weight={OBJECT_ENTROPY_WEIGHT};"  # the rule's last two, in order
+    assert any(n.startswith("budget rule") and rule_note in n for n in notes)
     assert not any("f0_density" in n for n in notes), "the narrow band lost from 1500 iterations on"
     tensorf, _ = finished("tensorf-vm", TINY_SCENE)
     assert tensorf.pipeline.effects.background == "random", "the same background, masks off"

@@ -537,7 +537,9 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
             for w in ("0.001", "0.01", "0.1")
         },
         # Session 59: InfoNeRF's ray entropy on each method's val choice. Session 61: the second group's 0.00003 on
-        # fourierf-vm too (the object rule's own settings, which then took the entropy for objects).
+        # fourierf-vm too (the object rule's own settings, which then took the entropy for objects). Session 62: both
+        # groups' 0.00003 at 1040 and 1500 iterations (``pcpu1040``, ``pcpu1500``), where the first band of 0.05 lost,
+        # so the object rule takes it at 800 iterations only.
         **{
             f"wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-ent{w}": [
                 *LEGO_COMP8, *first_band("0.05"), *RANDOM_AFTER_UPDATE, *entropy(w),

@@ -6,8 +6,9 @@ and by TensoRF alike, without the paper's weight decay 0.2 and without TensoRF's
 optimiser), at a grid lr 0.04, with TV 4 on the planes (``OBJECT_TV_WEIGHT``; lego val, the preset's -> the
 rule's: FourieRF 21.30 -> 22.57 at 800 iterations, 20.34 -> 22.48 at 3000; TensoRF 21.41 -> 22.62, 20.50 -> 21.74)
 and with half TensoRF's components (``OBJECT_COMPONENTS``); where its images carry alpha, on a random background from
-the first occupancy update on (``OBJECT_RANDOM_BACKGROUND_FROM``); and with InfoNeRF's ray entropy
-(``OBJECT_ENTROPY_WEIGHT``).
+the first occupancy update on (``OBJECT_RANDOM_BACKGROUND_FROM``); with InfoNeRF's ray entropy
+(``OBJECT_ENTROPY_WEIGHT``); and FourieRF, in an 800-iteration run (the CPU default), from a narrower first band than
+the paper's (``OBJECT_NARROW_BAND``).
 A forward-facing scene wants a 4x grid learning rate (TensoRF's 0.02 is tuned for 25k iterations: fern val 18.91 ->
 19.33 at 800, 18.27 -> 19.97 at 3000; tensorf-vm likewise) and a constant TV weight on the planes, 6 in a run of up to
 800 iterations (``REAL_SHORT_TV_WEIGHT``) and 4 in a longer one (``REAL_TV_WEIGHT``), both methods alike, and FourieRF,
@@ -80,11 +81,30 @@ test 22.79 -> 23.08), 22.84 -> 23.45 at 1500, 22.45 -> 22.83 at 3000 (P-MID, TV 
 paper's band 22.73 -> 23.13 at 800. From the first step instead it emptied fields that had not lit and kept stray fog
 where no training ray crosses the background (P-MID, fourierf-vm with the band below: 20.99 without the density L1,
 21.71 with it from the first update, 22.84 starting after it). Measured from 800 iterations up; shorter runs, tests and
-previews keep white. FourieRF keeps the paper's first band (f0 0.3) on it: a narrow one (0.05) fills the object's hull
-with smooth density, which the random background clears, and won at 800 iterations (23.13 -> 23.23, 3 seeds; session
-30's rule) but lost at every longer budget (3 seeds each: 1500 23.57 -> 23.29, 3000 23.39 -> 23.19, P-MID 22.88 ->
-22.80), where the paper's band is level with tensorf-vm or ahead of it (1500: 23.45, 3000: 23.43, P-MID at TV 6:
-22.83)."""
+previews keep white. On it FourieRF's first band depends on the budget (``OBJECT_NARROW_BAND``)."""
+
+OBJECT_NARROW_BAND = 0.05
+"""FourieRF, object runs of ``OBJECT_NARROW_BAND_FROM`` to ``OBJECT_NARROW_BAND_UP_TO`` iterations: the first band of
+both grids (f0, the share of the spectrum kept at step 0; the paper's 0.3, which longer object runs keep). A narrow band
+fills the object's hull with smooth density, which the random background then clears; in a short run that is the better
+start, in a longer one it lost (on an earlier rule its 1500-iteration renders had holes through the body). Lego val,
+mean of 3 seeds, one CPU thread a run, on the rest of the object rule with the ray entropy, 0.3 -> 0.05: 800 iterations
+23.20 -> 23.43 (every seed higher: +0.25, +0.33, +0.10; test 23.17 -> 23.42), 1040 23.51 -> 23.46 (-0.05, +0.17, -0.29;
+test 23.51 -> 23.50), 1500 23.69 -> 23.39 (-0.60, -0.07, -0.24; test 23.69 -> 23.39). Without the entropy (session 30's
+rule, which had 0.05 at every budget): 800 23.13 -> 23.24, 1500 23.51 -> 23.29, 3000 (P-CPU's sizes) 23.39 -> 23.19,
+P-MID 22.88 -> 22.80. A P-CPU run of fourierf-vm takes 1.04x as long (``benchmarks/ab_speed.py``, the rule without and
+with it, 2 interleaved pairs: final phase 1.05x, a step at 700 in-process 0.97x, rendering the test views 1.08x;
+BENCHMARKS.md): the band's width does not change what is filtered or for how long, so what differs is the field the run
+ends with (not traced further)."""
+
+OBJECT_NARROW_BAND_FROM = 800
+"""Object runs this long or longer get ``OBJECT_NARROW_BAND`` (up to ``OBJECT_NARROW_BAND_UP_TO``): measured on the
+rest of the object rule, which starts here too; shorter runs, tests and previews keep the paper's band."""
+
+OBJECT_NARROW_BAND_UP_TO = 800
+"""The longest object run that gets ``OBJECT_NARROW_BAND``: the one budget where it won (at 1040 and 1500
+iterations it lost, above); a run between 800 and 1040 keeps the paper's band, since where the two cross was not
+measured."""
 
 OBJECT_ENTROPY_WEIGHT = 0.00003
 """Object runs of ``OBJECT_ENTROPY_FROM`` iterations or more, both methods: InfoNeRF's ray entropy at this weight
@@ -92,16 +112,18 @@ OBJECT_ENTROPY_WEIGHT = 0.00003
 cameras; InfoNeRF's own 0.001 lost 1.4 dB val on lego, one seed), so fog and doubled geometry that no photo charges
 cost. Lego val, mean of 3 seeds, off -> on: 800 iterations (P-CPU) on the rest of the rule fourierf-vm 23.13 -> 23.20
 (higher on every seed; test 22.98 -> 23.17; on its val choice, a first band of 0.05, 23.24 -> 23.43), tensorf-vm 23.25
--> 23.27 (test 23.08 -> 23.21); 3000 iterations (P-MID) fourierf-vm 22.88 -> 22.97 (test 22.78 -> 23.09), tensorf-vm at
-its TV 6 22.83 -> 23.02 (test 22.73 -> 23.04). It lifts both methods at both budgets, so, like the rest of the object
-rule, it is theirs alike. A P-CPU run of fourierf-vm takes 1.21x as long (``benchmarks/ab_speed.py``, the rule without
-and with it, 2 interleaved pairs: final phase 1.10x, a step at 700 in-process 1.17x; BENCHMARKS.md; an A/B of the option
-in session 60, 3 pairs, read 1.07x, 1.09x and 1.16x). Forward-facing scenes go without it: on fern (P-CPU, one seed) it
-lowered both methods at every weight tried (0.00003: fourierf-vm 20.51 -> 20.09, tensorf-vm 20.04 -> 19.94)."""
+-> 23.27 (test 23.08 -> 23.21); 1500 (P-CPU's sizes) fourierf-vm 23.51 -> 23.69 (every seed higher; test 23.44 ->
+23.69), tensorf-vm 23.44 -> 23.54 (test 23.37 -> 23.52); 3000 iterations (P-MID) fourierf-vm 22.88 -> 22.97 (test 22.78
+-> 23.09), tensorf-vm at its TV 6 22.83 -> 23.02 (test 22.73 -> 23.04). It lifts both methods at each budget, so, like
+the rest of the object rule, it is theirs alike. A P-CPU run of fourierf-vm takes 1.21x as long
+(``benchmarks/ab_speed.py``, the rule without and with it, 2 interleaved pairs: final phase 1.10x, a step at 700
+in-process 1.17x; session 61, BENCHMARKS.md at 5ece9eb; an A/B of the option in session 60, 3 pairs, read 1.07x, 1.09x
+and 1.16x). Forward-facing scenes go without it: on fern (P-CPU, one seed) it lowered both methods at every weight tried
+(0.00003: fourierf-vm 20.51 -> 20.09, tensorf-vm 20.04 -> 19.94)."""
 
 OBJECT_ENTROPY_FROM = 800
-"""Object runs this long or longer get ``OBJECT_ENTROPY_WEIGHT``: measured at 800 and 3000 iterations only; shorter
-runs, tests and previews go without it."""
+"""Object runs this long or longer get ``OBJECT_ENTROPY_WEIGHT``: measured at 800, 1500 and 3000 iterations only;
+shorter runs, tests and previews go without it."""
 
 BACKGROUND_PATH = "pipeline.effects.background"
 
@@ -286,6 +308,17 @@ def object_background(scene_preset: str, iterations: int, background: str) -> di
     return {BACKGROUND_PATH: "random"}
 
 
+def object_first_band(scene_preset: str, iterations: int) -> dict[str, Any]:
+    """The rule's first band for a FourieRF run (none: the preset's): ``OBJECT_NARROW_BAND`` for an object run of
+    ``OBJECT_NARROW_BAND_FROM`` to ``OBJECT_NARROW_BAND_UP_TO`` iterations."""
+    if not _object_run_from(scene_preset, iterations, OBJECT_NARROW_BAND_FROM) or iterations > OBJECT_NARROW_BAND_UP_TO:
+        return {}
+    return {
+        "pipeline.model.fourier.f0_density": OBJECT_NARROW_BAND,
+        "pipeline.model.fourier.f0_color": OBJECT_NARROW_BAND,
+    }
+
+
 def object_entropy(scene_preset: str, iterations: int) -> dict[str, Any]:
     """The rule's ray entropy (none: off) for an object run of ``OBJECT_ENTROPY_FROM`` iterations or more."""
     if not _object_run_from(scene_preset, iterations, OBJECT_ENTROPY_FROM):
@@ -298,12 +331,14 @@ def short_run_settings(method: str, scene_preset: str, iterations: int, backgrou
     declares ``background``."""
     if iterations >= PAPER_ITERATIONS or (method, scene_preset) not in SHORT_RUN_SETTINGS:
         return {}
+    fourierf = method == "fourierf-vm"
     settings = SHORT_RUN_SETTINGS[(method, scene_preset)] | object_components(scene_preset, iterations)
+    if fourierf:
+        settings |= object_first_band(scene_preset, iterations)
     settings |= object_background(scene_preset, iterations, background) | object_entropy(scene_preset, iterations)
     short_tv = real_tv_weight(scene_preset, iterations)
     if short_tv is not None:
         settings |= _tv(short_tv)
-    fourierf = method == "fourierf-vm"
     by_step = {
         "pipeline.model.fourier.ramp_fraction": ramp_fraction(scene_preset, iterations) if fourierf else None,
         "pipeline.model.fourier.density_axes": density_axes(scene_preset, iterations) if fourierf else None,

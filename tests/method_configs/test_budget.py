@@ -14,6 +14,9 @@ from fourierf_plugin.method_configs.budget import (
     OBJECT_COMPONENTS_FROM,
     OBJECT_ENTROPY_FROM,
     OBJECT_ENTROPY_WEIGHT,
+    OBJECT_NARROW_BAND,
+    OBJECT_NARROW_BAND_FROM,
+    OBJECT_NARROW_BAND_UP_TO,
     OBJECT_RANDOM_BACKGROUND_FROM,
     OBJECT_TV_WEIGHT,
     PAPER_ITERATIONS,
@@ -54,8 +57,14 @@ def test_rule_is_a_function_of_the_iteration_count() -> None:
     random = {"pipeline.effects.background": "random"}
     assert short_run_settings("tensorf-vm", "synthetic", PAPER_ITERATIONS - 1) == short | random, "masks off"
     assert short_run_settings("fourierf-vm", "synthetic", PAPER_ITERATIONS - 1) == short | random, "the paper's band"
-    assert short_run_settings("fourierf-vm", "synthetic", OBJECT_RANDOM_BACKGROUND_FROM) == short | random
-    assert OBJECT_RANDOM_BACKGROUND_FROM == OBJECT_COMPONENTS_FROM == OBJECT_ENTROPY_FROM
+    band = {
+        "pipeline.model.fourier.f0_density": OBJECT_NARROW_BAND,
+        "pipeline.model.fourier.f0_color": OBJECT_NARROW_BAND,
+    }
+    assert short_run_settings("fourierf-vm", "synthetic", OBJECT_NARROW_BAND_UP_TO) == short | band | random
+    assert short_run_settings("tensorf-vm", "synthetic", OBJECT_NARROW_BAND_UP_TO) == short | random, "no band to set"
+    assert short_run_settings("fourierf-vm", "synthetic", OBJECT_NARROW_BAND_UP_TO + 1) == short | random
+    assert OBJECT_RANDOM_BACKGROUND_FROM == OBJECT_COMPONENTS_FROM == OBJECT_ENTROPY_FROM == OBJECT_NARROW_BAND_FROM
     assert short_run_settings("fourierf-vm", "synthetic", 3000, "none") == short, "photos: no alpha, no random colour"
     assert short_run_settings("tensorf-vm", "synthetic", 3000, "none") == short
     assert short_run_settings("fourierf-vm", "synthetic", 3000, "black") == short, "scored on black: not measured"
@@ -102,21 +111,32 @@ def test_cpu_run_of_an_object_drops_weight_decay_and_says_so() -> None:
     assert any(n.startswith("budget rule") and "weight_decay=0.0" in n for n in notes)
 
 
-def test_an_object_run_trains_on_a_random_background_with_the_papers_band() -> None:
+def test_an_object_run_trains_on_a_random_background_from_a_band_that_follows_the_budget() -> None:
     config, notes = finished("fourierf-vm", TINY_SCENE)
-    assert config.max_num_iterations >= OBJECT_RANDOM_BACKGROUND_FROM
+    assert config.max_num_iterations == OBJECT_NARROW_BAND_UP_TO >= OBJECT_RANDOM_BACKGROUND_FROM, "the CPU default"
     model = config.pipeline.model
     paper = all_methods["fourierf-vm"].pipeline.model.fourier
-    assert (model.fourier.f0_density, model.fourier.f0_color) == (paper.f0_density, paper.f0_color) == (0.3, 0.3)
+    assert (paper.f0_density, paper.f0_color) == (0.3, 0.3)
+    assert (model.fourier.f0_density, model.fourier.f0_color) == (OBJECT_NARROW_BAND,) * 2 != (0.3, 0.3)
     assert config.pipeline.effects.background == "random", "the scene declares white: its images carry alpha"
     assert model.random_background_from is None, "random from the step after the first occupancy update, white before"
-    rule_note = f"background=random, entropy_weight={OBJECT_ENTROPY_WEIGHT};"  # the rule's last two, in order
+    band = f"f0_density={OBJECT_NARROW_BAND}, f0_color={OBJECT_NARROW_BAND}"
+    rule_note = f"{band}, background=random, entropy_weight={OBJECT_ENTROPY_WEIGHT};"  # the rule's last four, in order
     assert any(n.startswith("budget rule") and rule_note in n for n in notes)
-    assert not any("f0_density" in n for n in notes), "the narrow band lost from 1500 iterations on"
     tensorf, _ = finished("tensorf-vm", TINY_SCENE)
     assert tensorf.pipeline.effects.background == "random", "the same background, masks off"
+    longer, notes = finished("fourierf-vm", TINY_SCENE, "--max-num-iterations", str(OBJECT_NARROW_BAND_UP_TO + 1))
+    assert (longer.pipeline.model.fourier.f0_density, longer.pipeline.model.fourier.f0_color) == (0.3, 0.3)
+    assert longer.pipeline.effects.background == "random"
+    assert not any("f0_density" in n for n in notes), "the narrow band lost at 1040 and 1500 iterations"
     short, _ = finished("fourierf-vm", TINY_SCENE, "--max-num-iterations", str(OBJECT_RANDOM_BACKGROUND_FROM - 1))
     assert short.pipeline.effects.background == "white"
+    assert short.pipeline.model.fourier.f0_density == 0.3, "measured on the rest of the object rule, from 800 up"
+    mine, notes = finished("fourierf-vm", TINY_SCENE, "--pipeline.model.fourier.f0-color", "0.3")
+    assert (mine.pipeline.model.fourier.f0_density, mine.pipeline.model.fourier.f0_color) == (OBJECT_NARROW_BAND, 0.3)
+    assert any("kept your pipeline.model.fourier.f0_color" in n for n in notes), (
+        "a flag wins, one typed as the preset's"
+    )
 
 
 @pytest.mark.parametrize("method", ["fourierf-vm", "tensorf-vm"])

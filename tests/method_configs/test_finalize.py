@@ -27,6 +27,7 @@ from fourierf_plugin.method_configs import all_methods, config_registry, finaliz
 from fourierf_plugin.method_configs.budget import (
     OBJECT_COMPONENTS,
     OBJECT_ENTROPY_WEIGHT,
+    OBJECT_NARROW_BAND,
     OBJECT_TV_WEIGHT,
     short_run_settings,
 )
@@ -68,7 +69,8 @@ def without_decisions(config: TrainerConfig) -> dict:
     data["pipeline"]["model"]["field"].pop("appearance_components")
     for decided in ("tv_decay_ratio", "tv_weight_density", "tv_weight_appearance", "entropy_weight"):
         data["pipeline"]["model"].pop(decided)
-    data["pipeline"]["model"]["fourier"].pop("ramp_fraction")
+    for decided in ("ramp_fraction", "f0_density", "f0_color"):
+        data["pipeline"]["model"]["fourier"].pop(decided)
     data["optimizer"].pop("weight_decay")
     data["optimizer"].pop("lr_grids")
     data["optimizer"].pop("lr_decay_ratio")
@@ -98,7 +100,8 @@ def test_blender_scene_keeps_the_synthetic_preset_and_gets_its_declared_effects(
         "budget rule (800 < 10000 iterations): weight_decay=0.0, lr_decay_ratio=1.0, lr_grids=0.04, "
         f"tv_weight_density={OBJECT_TV_WEIGHT}, tv_weight_appearance={OBJECT_TV_WEIGHT}, "
         f"density_components={(OBJECT_COMPONENTS[0],) * 3}, appearance_components={(OBJECT_COMPONENTS[1],) * 3}, "
-        f"background=random, entropy_weight={OBJECT_ENTROPY_WEIGHT};"
+        f"f0_density={OBJECT_NARROW_BAND}, f0_color={OBJECT_NARROW_BAND}, background=random, "
+        f"entropy_weight={OBJECT_ENTROPY_WEIGHT};"
     )
     declared = "(the scene declares: background=white, rays=euclidean, view-dependent=no, occlusion-regularisation=no, "
     assert notes[2] == (

@@ -91,11 +91,12 @@ start, in a longer one it lost (on an earlier rule its 1500-iteration renders ha
 mean of 3 seeds, one CPU thread a run, on the rest of the object rule with the ray entropy, 0.3 -> 0.05: 800 iterations
 23.20 -> 23.43 (every seed higher: +0.25, +0.33, +0.10; test 23.17 -> 23.42), 1040 23.51 -> 23.46 (-0.05, +0.17, -0.29;
 test 23.51 -> 23.50), 1500 23.69 -> 23.39 (-0.60, -0.07, -0.24; test 23.69 -> 23.39). Without the entropy (session 30's
-rule, which had 0.05 at every budget): 800 23.13 -> 23.24, 1500 23.51 -> 23.29, 3000 (P-CPU's sizes) 23.39 -> 23.19,
-P-MID 22.88 -> 22.80. A P-CPU run of fourierf-vm takes 1.04x as long (``benchmarks/ab_speed.py``, the rule without and
-with it, 2 interleaved pairs: final phase 1.05x, a step at 700 in-process 0.97x, rendering the test views 1.08x;
-BENCHMARKS.md): the band's width does not change what is filtered or for how long, so what differs is the field the run
-ends with (not traced further)."""
+rule, which had 0.05 at every budget; the 0.05 rows from 1500 on did not record their threads): 800 23.13 -> 23.24, 1500
+23.51 -> 23.29, 3000 (P-CPU's sizes) 23.30 -> 23.19 (23.39 as the 0.3 rows were first recorded), P-MID 22.88 -> 22.80. A
+P-CPU run of fourierf-vm takes 1.04x as long (``benchmarks/ab_speed.py``, the rule without and with it, 2 interleaved
+pairs: final phase 1.05x, a step at 700 in-process 0.97x, rendering the test views 1.08x; BENCHMARKS.md): the band's
+width does not change what is filtered or for how long, so what differs is the field the run ends with (not traced
+further)."""
 
 OBJECT_NARROW_BAND_FROM = 800
 """Object runs this long or longer get ``OBJECT_NARROW_BAND`` (up to ``OBJECT_NARROW_BAND_UP_TO``): measured on the

@@ -236,6 +236,8 @@ PROTOCOLS = {  # name, iterations, rays per batch, initial and final grid side, 
     "pmid800": Protocol("P-MID sizes, 800 it.", 800, 2048, 96, 192, 2),
     # P-CPU at 1.3 × its iterations: the wall time of a final cutoff 0.7 at 800 (ab_speed), for an equal-time check.
     "pcpu1040": Protocol("P-CPU, 1040 it.", 1040, 1024, 64, 128, 4),
+    # Between 800 and 1040 (session 63): where the object rule's first band of 0.05 (won at 800) stops paying.
+    "pcpu900": Protocol("P-CPU sizes, 900 it.", 900, 1024, 64, 128, 4),
     # P-CPU's sizes at P-MID's 3000 iterations, for the curve along training (the ``curve`` stage only).
     "pcpu3000": Protocol("P-CPU sizes, 3000 it.", 3000, 1024, 64, 128, 4),
     # Between the two: where the budget rule's revival at once (over 800 iterations) starts to pay (fern), and whether
@@ -552,6 +554,24 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
             ]
             for w in ("0.00001", "0.00003", "0.0001", "0.0003", "0.001")
         },
+        # Session 63: the narrow first band's neighbours at 800 iterations on the rule with the entropy (0.05 won
+        # there by 0.23 val over the paper's 0.3): a narrower or wider band, the band open sooner or later, the
+        # geometry's band narrow and the colour's at the paper's 0.3.
+        **{
+            f"wd0-nodecay-lr0.04-tv4-comp8-f{f0}-bgwarm-ent0.00003": [
+                *LEGO_COMP8, *first_band(f0), *RANDOM_AFTER_UPDATE, *entropy("0.00003"),
+            ]
+            for f0 in ("0.02", "0.1")
+        },
+        **{
+            f"wd0-nodecay-lr0.04-tv4-comp8-f0.05-ramp{r}-bgwarm-ent0.00003": [
+                *LEGO_COMP8, *first_band("0.05"), RAMP, r, *RANDOM_AFTER_UPDATE, *entropy("0.00003"),
+            ]
+            for r in ("0.1", "0.3")
+        },
+        "wd0-nodecay-lr0.04-tv4-comp8-f0d0.05-bgwarm-ent0.00003": [
+            *LEGO_COMP8, F0_DENSITY, "0.05", *RANDOM_AFTER_UPDATE, *entropy("0.00003"),
+        ],
         # Session 60: how many unseen rays the entropy at 0.00003 scores (1024 above, InfoNeRF's; 0 = training rays
         # only), on each method's P-CPU val choice.
         **{

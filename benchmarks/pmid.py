@@ -572,6 +572,14 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
         "wd0-nodecay-lr0.04-tv4-comp8-f0d0.05-bgwarm-ent0.00003": [
             *LEGO_COMP8, F0_DENSITY, "0.05", *RANDOM_AFTER_UPDATE, *entropy("0.00003"),
         ],
+        # ... and the TV weight on the narrow band (the curriculum is a smoothness prior too: does it want less?).
+        **{
+            f"wd0-nodecay-lr0.04-tv{tv}-comp8-f0.05-bgwarm-ent0.00003": [
+                *RULE_LEGO, *tv_weights(float(tv)), *components(8, 24), *first_band("0.05"), *RANDOM_AFTER_UPDATE,
+                *entropy("0.00003"),
+            ]
+            for tv in (2, 3, 6)
+        },
         # Session 60: how many unseen rays the entropy at 0.00003 scores (1024 above, InfoNeRF's; 0 = training rays
         # only), on each method's P-CPU val choice.
         **{

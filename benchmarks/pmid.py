@@ -238,6 +238,7 @@ PROTOCOLS = {  # name, iterations, rays per batch, initial and final grid side, 
     "pcpu1040": Protocol("P-CPU, 1040 it.", 1040, 1024, 64, 128, 4),
     # Between 800 and 1040 (session 63): where the object rule's first band of 0.05 (won at 800) stops paying.
     "pcpu900": Protocol("P-CPU sizes, 900 it.", 900, 1024, 64, 128, 4),
+    "pcpu1000": Protocol("P-CPU sizes, 1000 it.", 1000, 1024, 64, 128, 4),
     # P-CPU's sizes at P-MID's 3000 iterations, for the curve along training (the ``curve`` stage only).
     "pcpu3000": Protocol("P-CPU sizes, 3000 it.", 3000, 1024, 64, 128, 4),
     # Between the two: where the budget rule's revival at once (over 800 iterations) starts to pay (fern), and whether

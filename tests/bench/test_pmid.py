@@ -183,6 +183,32 @@ def test_the_rule_line_sets_each_methods_800_iteration_run_beside_its_3000(pmid:
     assert pmid.rule_along_the_budget({r["key"]: r for r in rows[:2]}) == [], "a later seed's alone: no line"
 
 
+def test_the_targets_table_reads_each_target_against_the_baseline_it_names(pmid: ModuleType) -> None:
+    first, one, two = pmid.SEEDS
+    tensorf = {"method": "tensorf-vm"}
+    rows = [
+        *[_row("tv4", seed, val=23.0, test=test) for seed, test in ((first, 23.0), (one, 23.2), (two, 23.4))],
+        _row("tuned", first, val=22.9, test=22.0) | tensorf | {"key": "t1"},
+        _row("published", first, val=20.0, test=20.5) | tensorf | {"key": "t2"},  # lower on val: only if named
+        _row("best-on-test", first, val=19.0, test=30.0) | tensorf | {"key": "t3"},  # never chosen on test
+    ]
+    results = {r["key"]: r for r in rows}
+    targets = (
+        pmid.Target("lego", "pcpu", 0.5, 22.0),
+        pmid.Target("lego", "pcpu", 2.5, 23.5, tensorf=("published", "best-on-test"), against="a weak baseline"),
+        pmid.Target("lego", "pmid", 1.0),  # nothing run: no line
+    )
+    lines = [line for line in pmid.targets_table(results, targets) if line.startswith("| lego")]
+    assert len(lines) == 2
+    assert "`tuned`, 22.00 (1) | **+1.20** (+1.00) | met |" in lines[0], "the lead is the mean over each one's seeds"
+    assert "≥ 22.0 dB and ≥ +0.5 dB; each method at its val choice" in lines[0]
+    assert "`published`, 20.50 (1) | **+2.70** (+2.50) | missed: PSNR by 0.30 |" in lines[1]
+    assert "23.20 ± 0.16 (3)" in lines[1]
+    short = (pmid.Target("lego", "pcpu", 1.5),)
+    assert pmid.targets_table(results, short)[4].endswith("| missed: lead by 0.30 |")
+    assert pmid.targets_table({}, targets) == []
+
+
 def test_seeds_run_the_val_choice_on_the_later_seeds(pmid: ModuleType, tmp_path: Path) -> None:
     results = tmp_path / "results.jsonl"
     rows = [_row("wd0", pmid.SEEDS[0], val=22.0, test=20.0), _row("preset", pmid.SEEDS[0], val=21.0, test=23.0)]

@@ -581,6 +581,14 @@ SETTINGS: dict[str, dict[str, list[str]]] = {
             ]
             for tv in (2, 3, 6)
         },
+        # Session 64: TV 6 on the narrow band led seed 20211202 (23.48 against TV 4's 23.33), so tensorf-vm's rule at
+        # TV 6 and 8 with the entropy too: one TV for both methods, or none moves.
+        **{
+            f"wd0-nodecay-lr0.04-tv{tv}-comp8-bgwarm-ent0.00003": [
+                *RULE_LEGO, *tv_weights(float(tv)), *components(8, 24), *RANDOM_AFTER_UPDATE, *entropy("0.00003"),
+            ]
+            for tv in (6, 8)
+        },
         # Session 60: how many unseen rays the entropy at 0.00003 scores (1024 above, InfoNeRF's; 0 = training rays
         # only), on each method's P-CPU val choice.
         **{

@@ -209,6 +209,20 @@ def test_the_targets_table_reads_each_target_against_the_baseline_it_names(pmid:
     assert pmid.targets_table({}, targets) == []
 
 
+def test_the_p_mid_line_sets_the_first_seeds_800_iteration_run_beside_its_3000(pmid: ModuleType) -> None:
+    fern = {"scene": "fern", "method": "tensorf-vm", "setting": "lr0.08"}
+    rows = [
+        fern | {"protocol": "pmid800", "seed": pmid.SEEDS[0], "val_psnr": 16.5, "psnr": 15.5, "key": "short"},
+        # a later seed recorded before the first seed's (a rerun goes to the end): the first seed's is the line's
+        fern | {"protocol": "pmid", "seed": pmid.SEEDS[2], "val_psnr": 30.0, "psnr": 30.0, "key": "later"},
+        fern | {"protocol": "pmid", "seed": pmid.SEEDS[0], "val_psnr": 19.0, "psnr": 18.0, "key": "long"},
+    ]
+    assert pmid.p_mid_along_the_budget({r["key"]: r for r in rows}) == [
+        "- fern, tensorf-vm, P-MID sizes, `lr0.08`, 800 → 3000 iterations: val 16.50 → 19.00, test 15.50 → 18.00"
+    ]
+    assert pmid.p_mid_along_the_budget({r["key"]: r for r in rows[:2]}) == [], "no first-seed 3000 run: no line"
+
+
 def test_seeds_run_the_val_choice_on_the_later_seeds(pmid: ModuleType, tmp_path: Path) -> None:
     results = tmp_path / "results.jsonl"
     rows = [_row("wd0", pmid.SEEDS[0], val=22.0, test=20.0), _row("preset", pmid.SEEDS[0], val=21.0, test=23.0)]

@@ -236,7 +236,8 @@ PROTOCOLS = {  # name, iterations, rays per batch, initial and final grid side, 
     "pmid800": Protocol("P-MID sizes, 800 it.", 800, 2048, 96, 192, 2),
     # P-CPU at 1.3 × its iterations: the wall time of a final cutoff 0.7 at 800 (ab_speed), for an equal-time check.
     "pcpu1040": Protocol("P-CPU, 1040 it.", 1040, 1024, 64, 128, 4),
-    # Between 800 and 1040 (session 63): where the object rule's first band of 0.05 (won at 800) stops paying.
+    # Between 800 and 1040 (session 63): where the object rule's first band of 0.05 (won at 800) stops paying; session
+    # 64: it won at both, so the rule takes it up to 1000 iterations.
     "pcpu900": Protocol("P-CPU sizes, 900 it.", 900, 1024, 64, 128, 4),
     "pcpu1000": Protocol("P-CPU sizes, 1000 it.", 1000, 1024, 64, 128, 4),
     # P-CPU's sizes at P-MID's 3000 iterations, for the curve along training (the ``curve`` stage only).

@@ -1214,10 +1214,10 @@ def targets_table(results: dict[str, dict], targets: Sequence[Target] = TARGETS)
         if not all(rows.values()):
             continue
         test = {m: {r["seed"]: r["psnr"] for r in rows[m]} for m in METHODS}
-        lead = float(np.mean(list(test["fourierf-vm"].values())) - np.mean(list(test["tensorf-vm"].values())))
+        own, baseline = (float(np.mean(list(test[m].values()))) for m in METHODS)
+        lead = own - baseline
         shared = [seed for seed in SEEDS if seed in test["fourierf-vm"] and seed in test["tensorf-vm"]]
         per_seed = ", ".join(f"{test['fourierf-vm'][s] - test['tensorf-vm'][s]:+.2f}" for s in shared)
-        own = float(np.mean(list(test["fourierf-vm"].values())))
         short = [f"lead by {t.lead - lead:.2f}"] if lead < t.lead else []
         if t.floor is not None and own < t.floor:
             short.append(f"PSNR by {t.floor - own:.2f}")

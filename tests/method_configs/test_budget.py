@@ -113,8 +113,8 @@ def test_cpu_run_of_an_object_drops_weight_decay_and_says_so() -> None:
 
 def test_an_object_run_trains_on_a_random_background_from_a_band_that_follows_the_budget() -> None:
     config, notes = finished("fourierf-vm", TINY_SCENE)
-    default = config.max_num_iterations  # the CPU default
-    assert OBJECT_NARROW_BAND_FROM == OBJECT_RANDOM_BACKGROUND_FROM <= default <= OBJECT_NARROW_BAND_UP_TO
+    default = config.max_num_iterations  # the CPU default: where the band's and the background's rules start
+    assert OBJECT_NARROW_BAND_FROM == OBJECT_RANDOM_BACKGROUND_FROM == default < OBJECT_NARROW_BAND_UP_TO
     model = config.pipeline.model
     paper = all_methods["fourierf-vm"].pipeline.model.fourier
     assert (paper.f0_density, paper.f0_color) == (0.3, 0.3)

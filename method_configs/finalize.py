@@ -50,7 +50,7 @@ def finalize(config: TrainerConfig, given: frozenset[str] = frozenset()) -> tupl
     if isinstance(parser, CaptureParserConfig):  # config.json records the decision, so a saved run keeps it
         parser.pin(declared)
     if declared.reason:
-        notes.append(f"scene kind: {'object (bounded)' if declared.bounded else 'forward-facing'} ({declared.reason})")
+        notes.append(f"scene kind: {declared.kind_label} ({declared.reason})")
     preset = config.scene_preset
     if preset == "auto":
         preset = "synthetic" if declared.bounded else "real"

@@ -4,12 +4,12 @@ Why: the method presets carry the paper's GPU settings (10k iterations, batch 40
 on two CPU cores for the bundled 100×100 scene. The rule, applied to every size the user leaves at the preset's
 value (a flag always wins):
 
-* on a GPU: the paper's settings; a forward-facing scene gets TensoRF's LLFF final grid, 640³ (the old FourieRF LLFF
-  configs' too; the paper gives no real-scene grid, and 300³ is its synthetic one). The initial grid is 128³ either
-  way: TensoRF's LLFF ``N_voxel_init`` is 2097156 ≈ 128³, which on the NDC box is the 141×157×94 of its table;
+* on a GPU: the paper's settings; a forward-facing scene gets TensoRF's LLFF final grid, 640³ (the paper gives
+  no real-scene grid, and 300³ is its synthetic one). The initial grid is 128³ either way: TensoRF's LLFF
+  ``N_voxel_init`` is 2097156 ≈ 128³, which on the NDC box is the 141×157×94 of its table;
 * on a CPU: 800 iterations of 1024 rays (protocol P-CPU, a few minutes), and a final grid of 1.28 voxels per pixel of
   the training images' larger side, between 64³ and 192³, upsampled from half that side (100×100 images:
-  64³ → 128³, what ``make demo`` used before this rule).
+  64³ → 128³).
 """
 
 from __future__ import annotations
@@ -39,12 +39,17 @@ class RunSize:
 
     def settings(self) -> dict[str, int]:
         """As config paths (what ``scene_presets.apply_settings`` takes)."""
-        return {
-            "max_num_iterations": self.iterations,
-            "pipeline.datamanager.rays_per_batch": self.rays_per_batch,
-            "pipeline.model.field.n_voxels_init": self.n_voxels_init,
-            "pipeline.model.field.n_voxels_final": self.n_voxels_final,
-        }
+        values = (self.iterations, self.rays_per_batch, self.n_voxels_init, self.n_voxels_final)
+        return dict(zip(SIZED_PATHS, values, strict=True))
+
+
+SIZED_PATHS = (
+    "max_num_iterations",
+    "pipeline.datamanager.rays_per_batch",
+    "pipeline.model.field.n_voxels_init",
+    "pipeline.model.field.n_voxels_final",
+)
+"""The config paths a run size sets (``--help`` shows them as sized)."""
 
 
 def run_size(views: int, height: int, width: int, device: torch.device, forward_facing: bool = False) -> RunSize:

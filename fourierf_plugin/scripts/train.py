@@ -11,6 +11,7 @@ from fourierf_plugin.engine.option_checks import check_training_options
 from fourierf_plugin.engine.trainer import Trainer, TrainerConfig
 from fourierf_plugin.method_configs import AnnotatedMethodUnion, finalize, resume_config
 from fourierf_plugin.method_configs.finalize import ignored_on_resume
+from fourierf_plugin.method_configs.registry import HELP_REGISTRY
 from fourierf_plugin.scripts.cli import run_cli, strip_verbose
 from fourierf_plugin.scripts.observers import build_observers
 from fourierf_plugin.utils.console import get_console
@@ -19,7 +20,8 @@ from fourierf_plugin.utils.errors import fail
 
 def parse_args(args: list[str]) -> TrainerConfig:
     """The preset chosen by the first word, with every override applied (not yet finished: see ``build_config``)."""
-    return copy.deepcopy(tyro.cli(AnnotatedMethodUnion, args=args))  # type: ignore[arg-type]
+    with HELP_REGISTRY:  # --help says which defaults the run sizes or the short-run rules set
+        return copy.deepcopy(tyro.cli(AnnotatedMethodUnion, args=args))  # type: ignore[arg-type]
 
 
 def given_options(args: list[str]) -> frozenset[str]:

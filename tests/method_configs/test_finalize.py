@@ -24,13 +24,7 @@ from fourierf_plugin.data.parsers.llff import LLFF_DECLARATION, LLFFDataParserCo
 from fourierf_plugin.data.scene_effects import EffectsConfig, SceneEffects
 from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.method_configs import all_methods, config_registry, finalize, resume_config
-from fourierf_plugin.method_configs.budget import (
-    OBJECT_COMPONENTS,
-    OBJECT_ENTROPY_WEIGHT,
-    OBJECT_NARROW_BAND,
-    OBJECT_TV_WEIGHT,
-    short_run_settings,
-)
+from fourierf_plugin.method_configs.budget import Run, rules_for, short_run_settings
 from fourierf_plugin.method_configs.finalize import ignored_on_resume
 from fourierf_plugin.method_configs.scene_presets import (
     REAL_SCENE_SETTINGS,
@@ -96,19 +90,15 @@ def test_blender_scene_keeps_the_synthetic_preset_and_gets_its_declared_effects(
     # the budget rule trains an object with alpha on a random background (both methods)
     assert config.pipeline.effects == EffectsConfig.of(dataclasses.replace(BLENDER_DECLARATION, background="random"))
     assert notes[0].startswith("run size for 4 view(s) of 100x100 on cpu: ")
-    assert notes[1].startswith(
-        "budget rule (800 < 10000 iterations): weight_decay=0.0, lr_decay_ratio=1.0, lr_grids=0.04, "
-        f"tv_weight_density={OBJECT_TV_WEIGHT}, tv_weight_appearance={OBJECT_TV_WEIGHT}, "
-        f"density_components={(OBJECT_COMPONENTS[0],) * 3}, appearance_components={(OBJECT_COMPONENTS[1],) * 3}, "
-        f"f0_density={OBJECT_NARROW_BAND}, f0_color={OBJECT_NARROW_BAND}, background=random, "
-        f"entropy_weight={OBJECT_ENTROPY_WEIGHT};"
-    )
+    fired = [rule.name for rule in rules_for(Run.of(config, "white"))]
+    assert notes[1].startswith("short-run defaults: a run of 800 iterations")
+    assert [n.strip().split(":")[0] for n in notes[2 : 2 + len(fired)]] == fired, "one line per row that fired"
     declared = "(the scene declares: background=white, rays=euclidean, view-dependent=no, occlusion-regularisation=no, "
-    assert notes[2] == (
+    assert notes[-1] == (
         f"scene effects: background=random, rays=euclidean, view-dependent=no, occlusion-regularisation=no {declared}"
         "bounded)"
     )
-    assert len(notes) == 3
+    assert len(notes) == 3 + len(fired)
     shorter, _ = finalize(raw(TINY_SCENE, "--max-num-iterations", "400"))
     assert shorter.pipeline.effects == EffectsConfig.of(BLENDER_DECLARATION), "shorter runs keep the declared white"
 
@@ -125,7 +115,7 @@ def test_without_data_the_parsers_own_path_is_used() -> None:
 def test_forward_facing_scene_gets_every_real_scene_setting(llff_scene: Path) -> None:
     config, notes = finalize(raw(llff_scene))
     assert config.scene_preset == "real"
-    rule = short_run_settings(config.method_name, "real", config.max_num_iterations)  # where the budget rule differs
+    rule = short_run_settings(Run.of(config, LLFF_DECLARATION.background))  # where the short-run rows differ
     for path, value in VM_REAL.items():
         assert _get(config, path) == rule.get(path, value), path
     assert config.pipeline.datamanager.dataparser.data == llff_scene

@@ -9,7 +9,7 @@ sides run in this one invocation on this machine, alternating which goes first i
     python benchmarks/ab_speed.py --old HEAD --new HEAD --new-flags "--pipeline.model.entropy-weight 0.00003"
 
 The last form times an option rather than a change: one version, the new side trained with extra flags (each side's
-flags go before the data parser's), reported in a section of its own so the last default change's A/B stays.
+flags go before the data parser's), reported in a section of its own so a default change's A/B stays.
 
 P-CPU: lego 4 views (r_27 r_76 r_97 r_99), 100×100, batch 1024, grid 64³ → 128³, 800 iterations, the official code's
 optimiser (weight decay 0, no lr decay), 25 test views; or, with ``--scene fern``, fern 3 views at images_8 on the same
@@ -17,7 +17,8 @@ grid, batch and budget under the real-scene preset (a change to a forward-facing
 median final-phase seconds per iteration (iterations 601–800, from the runs' own logs, no profiler) and the median
 time to render the test views (``fourierf-eval``'s render seconds), the new/old ratios, and the test PSNR of each run
 (equal seeds must give equal PSNRs when the arithmetic did not change). Takes about 4 minutes per run on two cores;
-keep the machine quiet. Each scene has its own BENCHMARKS.md section.
+keep the machine quiet. Each scene has its own BENCHMARKS.md section, which says what differs between the sides
+(``--describe`` and any side's extra flags); the revisions each side ran are recorded in ``--work``'s meta.json.
 """
 
 from __future__ import annotations
@@ -77,11 +78,11 @@ SCENES = {
     "lego": Scene(
         "blender/lego", tuple(OPTIMISER),
         ("blender-data", "--downscale", "4", "--test-every", "8", "--view-ids", *VIEWS),
-        "Speed A/B of the last change to a default (interleaved)", "ab_speed",
+        "Speed A/B of a change to a default (lego, interleaved)", "ab_speed",
     ),
     "fern": Scene(
         "llff/fern", (), ("llff-data", "--num-views", "3"),
-        "Speed A/B of the last change to a forward-facing default (fern, interleaved)", "ab_speed_fern",
+        "Speed A/B of a change to a forward-facing default (fern, interleaved)", "ab_speed_fern",
     ),
 }  # fmt: skip
 BEGIN, END = SCENES["lego"].begin, SCENES["lego"].end
@@ -141,8 +142,8 @@ def export_tree(rev: str | None, where: Path) -> Path:
 
 
 def revision_label(rev: str | None) -> str:
-    """What a side ran, in words that stay true after later commits: ``rev`` with its commit (``HEAD (abc1234)``), or
-    the working tree on its commit, marked when it held uncommitted changes."""
+    """What a side ran, for meta.json: ``rev`` with its short commit id, or the working tree on its commit, marked when
+    it held uncommitted changes."""
     head = subprocess.run(
         ["git", "rev-parse", "--short", rev or "HEAD"], cwd=REPO, check=True, capture_output=True, text=True
     ).stdout.strip()
@@ -212,8 +213,9 @@ def summary(rows: list[dict], timings: dict[str, list[float]], meta: dict) -> li
     def each(side: str, key: str, digits: int) -> str:
         return " / ".join(f"{r[key]:.{digits}f}" for r in sorted(rows, key=lambda r: r["label"]) if r["side"] == side)
 
+    extra = [f"{side}: `{shlex.join(meta[f'{side}_flags'])}`" for side in ("old", "new") if meta.get(f"{side}_flags")]
     lines = [
-        f"old = `{meta['old']}`, new = `{meta['new']}`: {meta['describe']}",
+        (meta["describe"] or "old against new") + (f" (extra flags, {'; '.join(extra)})" if extra else ""),
         "",
         f"{meta['pairs']} interleaved pairs (seeds {', '.join(str(s) for s in meta['seeds'])}), alternating which side "
         "goes first; medians.",
@@ -264,7 +266,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--old", default="HEAD", help="git revision of the baseline")
     ap.add_argument("--new", default=None, help="git revision to compare (default: the working tree)")
-    ap.add_argument("--describe", default="", help="what differs between the sides (goes into BENCHMARKS.md)")
+    ap.add_argument("--describe", default="",
+                    help="what differs between the sides, without history: it goes into BENCHMARKS.md")  # fmt: skip
     ap.add_argument("--old-flags", default="", help="training flags of the old side only (one string)")
     ap.add_argument("--new-flags", default="", help="training flags of the new side only (one string)")
     ap.add_argument("--pairs", type=int, default=3)

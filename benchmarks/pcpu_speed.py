@@ -4,8 +4,8 @@ Protocol: ../shared lego, views r_27 r_76 r_97 r_99, 100×100, batch 1024 rays, 
 800 iterations, test PSNR on `--test-every 8` (25 views); every run trained with `--profile-phases True`.
 Reported per method as the median over seeds: process wall time of training, final-phase seconds per iteration
 (the steps after the last upsample), the Fourier filtering's share (forward + backward, whole run), peak RSS, test
-PSNR and the time to render the 25 test views. The per-phase breakdown before/after compares this checkout with
-an older commit (default: the end of the first session) on the same saved state with benchmarks/iteration_phases.py.
+PSNR and the time to render the 25 test views; and where one final-phase iteration's time goes, phase by phase
+(benchmarks/iteration_phases.py on the first fourierf-vm run's saved state).
 
 Two settings per method. "official optimiser" is the official code's (the settings pcpu_vs_reference.py times it
 with): its AdamW has weight decay hard-coded to 0 and FourieRF no learning-rate decay (spec §4.5, §8.1); TensoRF decays
@@ -15,7 +15,8 @@ to 0.1 without weight decay. "preset" is each method's preset unchanged (the pap
     python benchmarks/pcpu_speed.py                 # 3 seeds per method and setting, about 40 minutes on 2 cores
     python benchmarks/pcpu_speed.py --report-only   # rebuild the BENCHMARKS.md section from finished runs
 
-Finished runs (results.jsonl) and the phase breakdown (phases.json) are kept: delete a line or the file to re-time.
+Finished runs (results.jsonl) and the phase breakdown (phase_breakdown.json) are kept: delete a line or the file to
+re-time.
 """
 
 from __future__ import annotations
@@ -71,17 +72,10 @@ def phase_stats(run_dir: Path, final_from: int) -> dict:
     return {"final_s_per_it": sum(final.values()) / steps, "filter_share": ph.fourier_share(ph.phases_total(records))}
 
 
-def iteration_phases(run_dir: Path, step: int, code_dir: Path | None, out: Path) -> dict:
+def iteration_phases(run_dir: Path, step: int, out: Path) -> dict:
     cmd = [sys.executable, str(REPO / "benchmarks/iteration_phases.py"), str(run_dir), "--step", str(step)]
-    cmd += ["--iters", "20", "--out", str(out)] + (["--code-dir", str(code_dir)] if code_dir else [])
-    subprocess.run(cmd, check=True, cwd=REPO, stdout=subprocess.DEVNULL)
+    subprocess.run([*cmd, "--iters", "20", "--out", str(out)], check=True, cwd=REPO, stdout=subprocess.DEVNULL)
     return json.loads(out.read_text())
-
-
-def checkout(commit: str, where: Path) -> Path:
-    if not (where / "fourierf_plugin").is_dir():
-        subprocess.run(["git", "worktree", "add", "--detach", str(where), commit], check=True, cwd=REPO)
-    return where
 
 
 def median(values: list[float]) -> float:
@@ -106,7 +100,6 @@ def main() -> None:
     ap.add_argument("--shared", type=Path, default=REPO.parent / "shared")
     ap.add_argument("--work", type=Path, default=REPO / "outputs" / "bench_pcpu")
     ap.add_argument("--seeds", type=int, nargs="+", default=[20211202, 1, 2])
-    ap.add_argument("--before", default="da3a31e", help="commit to compare the phase breakdown with")
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")
     ap.add_argument("--report-only", action="store_true")
     args = ap.parse_args()
@@ -159,26 +152,22 @@ def main() -> None:
     lines += ["", *ratios, "", REFERENCE_NOTE]
     headline = next(iter(SETTINGS))
     first = next((r for r in results.values() if r["method"] == "fourierf-vm" and r["views"] == headline), None)
-    if first is not None and not args.report_only and not (args.work / "phases.json").exists():
-        run_dir = Path(first["run_dir"])
-        after = iteration_phases(run_dir, 700, None, args.work / "phases_after.json")
-        before_dir = checkout(args.before, args.work / f"code-{args.before}")
-        before = iteration_phases(run_dir, 700, before_dir, args.work / "phases_before.json")
-        (args.work / "phases.json").write_text(json.dumps({"before": before, "after": after}, indent=2))
-    if (args.work / "phases.json").exists():
-        both = json.loads((args.work / "phases.json").read_text())
-        before, after = both["before"], both["after"]
-        names = sorted(set(before["ms"]) | set(after["ms"]), key=lambda k: -before["ms"].get(k, 0.0))
+    breakdown = args.work / "phase_breakdown.json"
+    if first is not None and not args.report_only and not breakdown.exists():
+        iteration_phases(Path(first["run_dir"]), 700, breakdown)
+    if breakdown.exists():
+        phases = json.loads(breakdown.read_text())
+        names = sorted(phases["ms"], key=lambda k: (-phases["ms"][k], k))
         lines += [
             "",
             f"Per-phase breakdown of one final-phase iteration (step 700 of the seed-{first['seed'] if first else ''} "
-            f"fourierf-vm run ({SETTINGS[headline][0]}), its final state, grid {after['resolution']}, 20 iterations "
-            f"after 3 warm-up; benchmarks/iteration_phases.py), before = commit {args.before}:",
+            f"fourierf-vm run ({SETTINGS[headline][0]}), its final state, grid {phases['resolution']}, 20 iterations "
+            "after 3 warm-up; benchmarks/iteration_phases.py):",
             "",
-            "| phase | before ms | after ms |",
-            "|---|---|---|",
-            *[f"| {n} | {before['ms'].get(n, 0.0):.1f} | {after['ms'].get(n, 0.0):.1f} |" for n in names],
-            f"| **total s/it** | {before['seconds_per_iteration']:.3f} | {after['seconds_per_iteration']:.3f} |",
+            "| phase | ms |",
+            "|---|---|",
+            *[f"| {n} | {phases['ms'][n]:.1f} |" for n in names],
+            f"| **total s/it** | {phases['seconds_per_iteration']:.3f} |",
         ]
     body = [
         *section_head(

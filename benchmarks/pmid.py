@@ -1,35 +1,28 @@
-"""Few-shot quality at two budgets, P-CPU and P-MID: fourierf-vm against tensorf-vm, each at val-chosen settings.
+"""Few-shot quality at several budgets: fourierf-vm against tensorf-vm, each at val-chosen settings.
 
-Why two budgets: the paper's claim is that the curriculum pays where TensoRF overfits (bigger grids, more iterations,
-finer images). P-CPU is the budget a user runs on a CPU by default; P-MID is the largest that still trains in about
-20 minutes on a 2-core CPU (the cost estimate of ``engine.estimates``: 3000 × 2048 rays × 192 × 1.05e-6 s ≈ 21 min;
-lego took 24-45 min a run, two at a time with one thread each), so the gain-versus-scale trend can be read off one
-table.
+Why several budgets: the paper's claim is that the curriculum pays where TensoRF overfits (bigger grids, more
+iterations, finer images). P-CPU is the budget a user runs on a CPU by default; P-MID the largest that still trains in
+about 20 minutes on a 2-core CPU (the cost estimate of ``engine.estimates``); the others sit between the two or step
+toward the paper's Blender protocol, so the gain-versus-scale trend can be read off one table.
 
 | protocol | iterations | rays | grid | lego (4 views 27 76 97 99) | fern (3 views 1 10 19) |
 |---|---|---|---|---|---|
 | P-CPU | 800 | 1024 | 64³ → 128³ | 100×100 | 504×378 (images_8) |
+| P-CPU sizes, 900 / 1000 / 1040 / 1500 / 3000 it. | as named | 1024 | 64³ → 128³ | 100×100 | 504×378 (images_8) |
 | P-MID | 3000 | 2048 | 96³ → 192³ | 200×200 | 504×378 (images_8) |
-| P-CPU sizes, 3000 it. (curve) | 3000 | 1024 | 64³ → 128³ | 100×100 | 504×378 (images_8) |
-| P-CPU sizes, 1500 it. (the rule between) | 1500 | 1024 | 64³ → 128³ | 100×100 | 504×378 (images_8) |
+| P-MID sizes, 800 it. (fern only) | 800 | 2048 | 96³ → 192³ | — | 504×378 (images_8) |
 | P-HIGH (lego only) | 3000 | 2048 | 128³ → 300³ | 400×400 | — |
 | P-MID images, 300³ (lego only) | 3000 | 2048 | 128³ → 300³ | 200×200 | — |
 
 P-MID's final grid is what the CPU run sizing picks for these images (1.28 voxels per pixel of the larger side, capped
 at 192). TensoRF's LLFF configuration grows to 640³ over 25k iterations at 1/4 resolution and the paper's Blender
 protocol to 300³ at 800×800: neither fits a CPU's 20 minutes, and at 200×200 or 504×378 a 192³ grid already holds more
-voxels along each axis than the images have pixels across the scene.
-P-HIGH (session 32) goes one step toward the paper's Blender protocol where a CPU still can: lego at the shared data's
-full 400×400 with the paper's grids (128³ → 300³), at P-MID's iterations and rays; 35-45 minutes of training a run,
-two at a time with one thread each (``--threads`` caps the evaluations too): TV searched on one seed, each choice
-and the stronger TVs next to it on three (sessions 36-39; tensorf-vm's TV 16 on two). tensorf-vm's search ran on
-TensoRF's 16 / 48 components (settings without ``comp8`` pass none, and ``--budget-rule False`` keeps the
-preset's), fourierf-vm's on the object rule's 8 / 24; on 8 / 24 tensorf-vm's TV 12 (sessions 40-43: TV 10-16 on one
-seed, 12 and 14 on three) is its val choice, level with fourierf-vm.
-``pmid300`` (sessions 33-35) is P-HIGH's grids on P-MID's images, the 300³ final grid the issue's example P-MID names
-(41-58 minutes of training a run here, 3.5 on an H100 four at a time, so three seeds): which of P-HIGH's two changes
-opens the curriculum's edge. There too tensorf-vm's val choice is on 8 / 24 (TV 10, sessions 41-44), +0.24 dB test
-behind fourierf-vm (+0.50 while its TV 12 alone had run on three seeds).
+voxels along each axis than the images have pixels across the scene. P-HIGH is lego at the shared data's full 400×400
+with the paper's grids; ``pmid300`` the same grids on P-MID's images, which tells the grid's effect from the images'.
+
+A setting's name is its flags: hyphen-separated tokens, each one group of ``fourierf-train`` flags (``TOKENS``,
+``VALUED``), e.g. ``wd0-nodecay-lr0.04-tv4-comp8`` is weight decay 0, no lr decay, grid lr 0.04, TV 4 on both planes
+and 8 / 24 components. ``SETTINGS`` lists each scene's settings, in the order the report's sweep table lists them.
 
 Settings are chosen on validation views only (lego: every 8th of Blender's val split; fern: training images no run
 trains on, 2 9 18); the test views (lego every 8th test view, fern 0 8 16) are evaluated for every run but only the
@@ -49,21 +42,19 @@ regenerated from it alone). ``--device cuda --jobs 4`` runs four trainings at on
 and random streams, the times do (the table names the device). GPU runs are not bit-reproducible (grid_sample's CUDA
 backward accumulates with atomics): where a key is run again (``--again NOTE``), its earlier row moves to
 ``repeats.jsonl`` beside the results with NOTE as its ``repeat`` note, and the report sets both side by side. Nor is
-a CPU run on more than one thread (torch's parallel CPU kernels sum in a varying order; session 48: two 2-thread fern
-runs differed from step 40, and fern P-CPU tensorf-vm with Floaters-No-More, seed 20211202, read val 20.46 on two
-threads, 20.14 on one and 20.70 in its recorded row, which did not record its threads). On one thread, the default,
-it is: that run's training trace at commit 71362f1 and at session 48's code agreed to the printed digit, and session
-49's rerun read 20.14 again. Rows record their training's thread count (``train_threads``) and, where the density can
-revive, the batches it revived (``revived_batches``; 0: the run is TensoRF's ReLU to the bit).
+a CPU run on more than one thread (torch's parallel CPU kernels sum in a varying order); on one thread, the default,
+it is. Rows record their training's thread count (``train_threads``) and, where the density can revive, the batches
+it revived (``revived_batches``; 0: the run is TensoRF's ReLU to the bit).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 import threading
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -105,8 +96,7 @@ class Grid:
 GRIDS = (
     Grid(
         "docs/fern_grid_pcpu.png",
-        "P-CPU runs fourierf-vm `lr0.08-tvconst` and tensorf-vm `lr0.08`, each method's val choice when it was made, "
-        "both at TV 1",
+        "P-CPU runs fourierf-vm `lr0.08-tvconst` and tensorf-vm `lr0.08`, both at TV 1",
         ("fourierf-vm", "tensorf-vm"),
         "both runs are opaque everywhere (accumulation 1), so nothing is left empty. tensorf-vm's depth is broken into "
         "patches, many at the near end: density painted just in front of the cameras reproduces each training photo "
@@ -118,32 +108,28 @@ GRIDS = (
     ),
     Grid(
         "docs/fern_grid_pmid.png",
-        "P-MID runs of session 25 under the current rule, each method's val choice at P-MID then (since session 56 "
-        "fourierf-vm's is the same setting with Floaters-No-More from step 800, by 0.12 dB of mean val over 3 "
-        "seeds): fourierf-vm `lr0.08-tvconst-ramp0.2667-tv4-revive1` (val / test 21.84 / 20.99; its recorded run of "
-        "session 23, 21.66 / 20.92) and tensorf-vm `lr0.08-tvconst-tv4-fnm` (constant TV 4 with Floaters-No-More; "
-        "21.90 / 21.12, recorded 21.89 / 21.14), seed 20211202, CPU",
+        "P-MID runs fourierf-vm `lr0.08-tvconst-ramp0.2667-tv4-revive1` (val / test 21.84 / 20.99) and tensorf-vm "
+        "`lr0.08-tvconst-tv4-fnm` (constant TV 4 with Floaters-No-More; 21.90 / 21.12), seed 20211202, CPU",
         ("fourierf-vm", "tensorf-vm"),
         "both are opaque everywhere. tensorf-vm's RGB is the sharper of the two (the fronds). fourierf-vm's depth is "
         "one smooth layer for the plant but holds a near blob at the foot of the trunk (dark, in both views) and a "
-        "few near streaks at the top left; its RGB is softer (the band limit). The blob is no floater (session 29, "
-        "`benchmarks/point_probe.py`): it is the frond that hangs over the planter, which all three training views "
-        "see at NDC (-0.48, -0.80, -0.34) and both runs render at that depth there (0.34-0.35 and 0.33-0.36 for the "
-        "point's 0.33), fourierf-vm's as a blob wider than the frond, tensorf-vm's as the thin streak it is. Where "
-        "tensorf-vm errs it errs far: broken "
-        "patches of far depth over the ceiling and the wall at the top left. The curriculum and Floaters-No-More both "
-        "keep fern from ghosting at this scale; the gradient scaling does it without blurring.",
+        "few near streaks at the top left; its RGB is softer (the band limit). The blob is no floater: it is the frond "
+        "that hangs over the planter, which all three training views see at NDC (-0.48, -0.80, -0.34) and both runs "
+        "render at that depth there (0.34-0.35 and 0.33-0.36 for the point's 0.33), fourierf-vm's as a blob wider "
+        "than the frond, tensorf-vm's as the thin streak it is. Where tensorf-vm errs it errs far: broken patches of "
+        "far depth over the ceiling and the wall at the top left. The curriculum and Floaters-No-More both keep fern "
+        "from ghosting at this scale; the gradient scaling does it without blurring.",
     ),
     Grid(
         "docs/fern_grid_boundary.png",
-        "P-CPU runs of session 29, seed 20211202: fourierf-vm on the forward-facing rule `lr0.08-tvconst-tv4-"
+        "P-CPU runs, seed 20211202: fourierf-vm on the forward-facing rule `lr0.08-tvconst-tv4-"
         "alphamask0.25` (val / test 20.08 / 19.47), the same with mirror boundaries `...-mirror` (20.15 / 19.68), and "
         "tensorf-vm with Floaters-No-More `lr0.08-tvconst-tv4-fnm-alphamask0.25` (20.39 / 19.73)",
         ("fourierf-vm", "fourierf-vm mirror", "tensorf-vm + FNM"),
         "all three are opaque everywhere. With periodic filters fourierf-vm holds a near blob at the foot of the "
-        "planter (dark, both views): the frond that hangs over it, widened by the band limit. It is a real surface "
-        "(`benchmarks/point_probe.py --point -0.48 -0.80 -0.34`): all three training views see that point on the "
-        "frond (green pixels between white planter) and fourierf-vm renders them at its depth (0.335 for 0.330), "
+        "planter (dark, both views): the frond that hangs over it, widened by the band limit. It is a real surface: "
+        "all three training views see NDC (-0.48, -0.80, -0.34) on the frond (green pixels between white planter) "
+        "and fourierf-vm renders them at its depth (0.335 for 0.330), "
         "while tensorf-vm with Floaters-No-More renders the same training rays at 0.45-0.55: at this grid it paints "
         "the frond onto the planter (test view 0, row 340: the frond's pixels at 0.44-0.67 beside a planter at "
         "0.44-0.47; fourierf-vm's at 0.35-0.36 over twice the frond's width), which the gradient scaling favours by "
@@ -154,10 +140,8 @@ GRIDS = (
     ),
     Grid(
         "docs/fern_grid_pcpu_rule.png",
-        "P-CPU runs of session 47, seed 20211202, each method's P-CPU val choice under today's code: fourierf-vm on "
-        "the 800-iteration rule `lr0.08-tvconst-tv6-alphamask0.25-zfree` (val / test 20.51 / 19.96, as recorded) and "
-        "tensorf-vm with Floaters-No-More `lr0.08-tvconst-tv4-fnm` (20.14 / 19.48; its recorded run, commit 71362f1, "
-        "20.70 / 19.97)",
+        "P-CPU runs, seed 20211202: fourierf-vm on the 800-iteration rule `lr0.08-tvconst-tv6-alphamask0.25-zfree` "
+        "(val / test 20.51 / 19.96) and tensorf-vm with Floaters-No-More `lr0.08-tvconst-tv4-fnm` (20.14 / 19.48)",
         ("fourierf-vm", "tensorf-vm + FNM"),
         "both are opaque everywhere. fourierf-vm's RGB is the softer (the band limit), its depth one layer for the "
         "plant and the planter, the wall at the right and a few patches at the top left far, and the frond over the "
@@ -169,7 +153,7 @@ GRIDS = (
     ),
     Grid(
         "docs/lego_grid_phigh.png",
-        "P-HIGH runs of session 32, seed 20211202, each method's val choice there: fourierf-vm "
+        "P-HIGH runs, seed 20211202: fourierf-vm "
         "`wd0-nodecay-lr0.04-tv4-comp8-bgwarm` (val / test 22.37 / 22.43) and tensorf-vm "
         "`wd0-nodecay-lr0.04-tv10-bgwarm` (21.47 / 21.30); `--view-names r_0 r_80`",
         ("fourierf-vm", "tensorf-vm"),
@@ -185,14 +169,12 @@ GRIDS = (
     ),
     Grid(
         "docs/lego_grid_phigh_seed2.png",
-        "P-HIGH runs of seed 2, where tensorf-vm at its one-seed choice fell furthest: fourierf-vm "
-        "`wd0-nodecay-lr0.04-tv4-comp8-bgwarm` (val / test 22.23 / 22.00; session 36) and `...-tv8-comp8-bgwarm` "
-        "(22.50 / 22.57, session 37; level over three seeds with TV 12, the val choice by 0.01 dB since session 39), "
-        "tensorf-vm `wd0-nodecay-lr0.04-tv10-bgwarm` (20.64 / 19.75; session 36), `...-tv12-bgwarm` (21.88 / 21.45; "
-        "session 37) and `...-tv14-bgwarm` (22.40 / 22.10, the three-seed val choice on TensoRF's 16 / 48 "
-        "components; session 38; tensorf-vm's three runs here all on 16 / 48); "
-        "`--view-names r_56 r_152`, the two test views with the largest gaps at "
-        "the one-seed choices (4.1 and 4.5 dB); there fourierf-vm TV 4, TV 8 read 22.67, 24.37 and 24.50, 26.01 dB, "
+        "P-HIGH runs of seed 2, where tensorf-vm at TV 10 fell furthest behind fourierf-vm at TV 4: fourierf-vm "
+        "`wd0-nodecay-lr0.04-tv4-comp8-bgwarm` (val / test 22.23 / 22.00) and `...-tv8-comp8-bgwarm` (22.50 / 22.57), "
+        "tensorf-vm on TensoRF's 16 / 48 components `wd0-nodecay-lr0.04-tv10-bgwarm` (20.64 / 19.75), "
+        "`...-tv12-bgwarm` (21.88 / 21.45) and `...-tv14-bgwarm` (22.40 / 22.10); "
+        "`--view-names r_56 r_152`, the two test views with the largest gaps between those two "
+        "(4.1 and 4.5 dB); there fourierf-vm TV 4, TV 8 read 22.67, 24.37 and 24.50, 26.01 dB, "
         "tensorf-vm TV 10, TV 12, TV 14 18.54, 22.76, 23.73 and 20.05, 24.72, 26.17",
         ("fourierf-vm TV 4", "fourierf-vm TV 8", "tensorf-vm TV 10", "tensorf-vm TV 12", "tensorf-vm TV 14"),
         "all five leave a hole where the left track should be in r_56. At TV 10 tensorf-vm "
@@ -234,22 +216,20 @@ PROTOCOLS = {  # name, iterations, rays per batch, initial and final grid side, 
     "pmid": Protocol("P-MID", 3000, 2048, 96, 192, 2),
     # P-MID's sizes at P-CPU's 800 iterations: does quality hold as the budget grows from 800 to 3000?
     "pmid800": Protocol("P-MID sizes, 800 it.", 800, 2048, 96, 192, 2),
-    # P-CPU at 1.3 × its iterations: the wall time of a final cutoff 0.7 at 800 (ab_speed), for an equal-time check.
+    # P-CPU with as many more iterations as a final cutoff 0.7 costs in wall time at 800, for an equal-time check.
     "pcpu1040": Protocol("P-CPU, 1040 it.", 1040, 1024, 64, 128, 4),
-    # Between 800 and 1040 (session 63): where the object rule's first band of 0.05 (won at 800) stops paying; session
-    # 64: it won at both, so the rule takes it up to 1000 iterations.
+    # Between 800 and 1040: where the object rule's narrow first band stops paying.
     "pcpu900": Protocol("P-CPU sizes, 900 it.", 900, 1024, 64, 128, 4),
     "pcpu1000": Protocol("P-CPU sizes, 1000 it.", 1000, 1024, 64, 128, 4),
     # P-CPU's sizes at P-MID's 3000 iterations, for the curve along training (the ``curve`` stage only).
     "pcpu3000": Protocol("P-CPU sizes, 3000 it.", 3000, 1024, 64, 128, 4),
-    # Between the two: where the budget rule's revival at once (over 800 iterations) starts to pay (fern), and whether
-    # P-CPU's val choices carry past 800 iterations (lego, session 27).
+    # Between the two: where reviving a dark density at once starts to pay (fern), and whether P-CPU's val choices
+    # carry past 800 iterations (lego).
     "pcpu1500": Protocol("P-CPU sizes, 1500 it.", 1500, 1024, 64, 128, 4),
-    # Toward the paper's Blender protocol (128³ → 300³ at 800×800; session 32): lego at the shared data's full 400×400
-    # with the paper's grids, P-MID's iterations and rays. Does the curriculum's edge grow with the image and grid?
+    # Toward the paper's Blender protocol (128³ → 300³ at 800×800): lego at the shared data's full 400×400 with the
+    # paper's grids, P-MID's iterations and rays. Does the curriculum's edge grow with the image and grid?
     "phigh": Protocol("P-HIGH (lego 400×400, 300³)", 3000, 2048, 128, 300, 1),
-    # P-MID's images with P-HIGH's grids (the issue's example P-MID names a 300³ final grid; session 33): of
-    # P-HIGH's two changes from P-MID, is it the finer grid or the finer images that opens the curriculum's edge?
+    # P-MID's images with P-HIGH's grids: is it the finer grid or the finer images that opens the curriculum's edge?
     "pmid300": Protocol("P-MID images, 300³ (lego 200×200)", 3000, 2048, 128, 300, 2),
 }
 PROTOCOL_SCENES = {"pmid800": ("fern",), "phigh": ("lego",), "pmid300": ("lego",)}
@@ -259,582 +239,170 @@ CURVE_BASE = {"pcpu3000": "pcpu", "pmid": "pmid800"}
 CURVE_EVERY = 500
 """Iterations between the checkpoints a curve evaluates."""
 
-WD0 = ["--optimizer.weight-decay", "0"]
-NO_DECAY = ["--optimizer.lr-decay-ratio", "1.0"]
-TV_CONST = ["--pipeline.model.tv-decay-ratio", "1.0"]
-OCC_ON = ["--pipeline.effects.occlusion-regularization", "True"]
 RAMP = "--pipeline.model.fourier.ramp-fraction"
 F_FINAL = "--pipeline.model.fourier.f-final"
 F_FINAL_COLOR = "--pipeline.model.fourier.f-final-color"
 F0_DENSITY, F0_COLOR = "--pipeline.model.fourier.f0-density", "--pipeline.model.fourier.f0-color"
-FNM = ["--pipeline.model.floaters-gradient-scaling", "True"]
-FNM_FROM = "--pipeline.model.floaters-gradient-scaling-from"
-IN_BAND = ["--pipeline.model.fourier.init-in-band", "True"]
-LATE_ALPHA_MASK = ["--pipeline.model.occupancy-update-fractions", "0.3", "0.5"]
-"""The occupancy grid's two updates at 30 % and 50 % of the run (the object default: 20 % and 40 %)."""
-RANDOM_BACKGROUND = ["--pipeline.effects.background", "random", "--pipeline.model.random-background-from", "0"]
-"""A random colour behind each training ray from the first step (sessions 26-30; the flag pins it since session 30)."""
-RANDOM_AFTER_UPDATE = ["--pipeline.effects.background", "random"]
-"""A random training background from the step after the first occupancy update, white before (session 30)."""
-MIRROR = ["--pipeline.model.fourier.boundary", "mirror"]
-L1_OFF = ["--pipeline.model.l1-weight-initial", "0", "--pipeline.model.l1-weight-rest", "0"]
-L1_LATE = ["--pipeline.model.l1-weight-initial", "0"]
-"""No density L1 before the first occupancy update (TensoRF's 4e-5 from there on)."""
-OCCUPANCY_AT_STEP_200 = ["--pipeline.model.occupancy-update-fractions", "0.25"]
-"""A forward-facing run's one occupancy update at 25 % of 800 iterations, step 200 (the real preset: 10 %, step 80)."""
-EARLY_FINAL_GRID = ["--pipeline.model.field.upsample-fractions", "0.01"]
-"""One upsample at 1 % of the run: the field holds the final grid from step 8 (at 800 iterations) on."""
-RULE_LEGO = [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.04"]
-REVIVE1 = ["--pipeline.model.field.revive-patience", "1"]
-PLAIN_RELU = ["--pipeline.model.field.revive-dead-density", "False"]
-DENSITY_XY = ["--pipeline.model.fourier.density-axes", "0", "1"]
-"""The density curriculum on the image plane only: NDC depth (z) unfiltered from the first step (session 45)."""
-
-
-def tv_weights(weight: float) -> list[str]:
-    """Both TV weights (density and appearance planes) at ``weight``."""
-    return ["--pipeline.model.tv-weight-density", str(weight), "--pipeline.model.tv-weight-appearance", str(weight)]
-
-
-def fern_rule(ramp: str, tv: float = 4.0, lr: str = "0.08") -> list[str]:
-    """The forward-facing rule's flags with the band open by ``ramp`` of the run: grid lr, constant TV at ``tv``."""
-    return ["--optimizer.lr-grids", lr, *TV_CONST, RAMP, ramp, *tv_weights(tv)]
-
-
-FERN_PMID_RULE = fern_rule("0.2667")
-"""Session 19's forward-facing rule at 3000 iterations (the band open by step 800, constant TV 4), which P-MID's fern
-settings of sessions 19, 23 and 24 vary."""
-
-
-def fern_tv(tv: float, lr: str = "0.08") -> list[str]:
-    """The forward-facing rule at 800 iterations with a constant TV weight ``tv`` at grid lr ``lr`` (the preset's
-    band)."""
-    return ["--optimizer.lr-grids", lr, *TV_CONST, *tv_weights(tv)]
-
-
-def fern_short(tv: float, lr: str = "0.08") -> list[str]:
-    """``fern_tv`` with the occupancy update at step 200: tensorf-vm's forward-facing rule at 800 iterations."""
-    return [*fern_tv(tv, lr), *OCCUPANCY_AT_STEP_200]
-
-
-def fern_image_plane(tv: float, lr: str = "0.08") -> list[str]:
-    """``fern_short`` with the density curriculum on the image plane: fourierf-vm's forward-facing rule at 800
-    iterations since session 45 (TV 6 since session 46)."""
-    return [*fern_short(tv, lr), *DENSITY_XY]
-
-
-FERN_TV4 = fern_tv(4.0)
-"""The forward-facing rule at 800 iterations (grid lr 0.08, constant TV 4; the preset's band), which P-CPU's fern
-settings of sessions 16-26 vary."""
-
-
-def first_band(f0: str) -> list[str]:
-    """Both grids' first band (``f0`` of the spectrum kept at step 0)."""
-    return [F0_DENSITY, f0, F0_COLOR, f0]
-
-
-def components(density: int, appearance: int) -> list[str]:
-    """Component counts per plane/line group (TensoRF's are 16 for density and 48 for appearance)."""
-    return [
-        "--pipeline.model.field.density-components", *[str(density)] * 3,
-        "--pipeline.model.field.appearance-components", *[str(appearance)] * 3,
-    ]  # fmt: skip
-
-
-def grid(init_side: int, final_side: int) -> list[str]:
-    """The initial and final grid (later flags win over the protocol's own sizes)."""
-    return [
-        "--pipeline.model.field.n-voxels-init", str(init_side**3),
-        "--pipeline.model.field.n-voxels-final", str(final_side**3),
-    ]  # fmt: skip
-
-
-def depth_smoothness(weight: float) -> list[str]:
-    """RegNeRF's depth smoothness at ``weight`` on the default unseen-view patches (4 of 8×8 pixels a step)."""
-    return ["--pipeline.model.depth-smoothness-weight", str(weight)]
-
-
-def occlusion(weight: str) -> list[str]:
-    """FreeNeRF's occlusion term at ``weight`` (the preset's 0.01; 0 = off)."""
-    return ["--pipeline.model.occlusion-weight", weight]
-
-
-def distortion(weight: str) -> list[str]:
-    """mip-NeRF 360's distortion loss at ``weight`` on the training rays."""
-    return ["--pipeline.model.distortion-weight", weight]
-
-
-def entropy(weight: str, unseen_rays: int | None = None) -> list[str]:
-    """InfoNeRF's ray entropy at ``weight`` on the training rays and ``unseen_rays`` (default 1024) unseen rays."""
-    rays = [] if unseen_rays is None else ["--pipeline.model.entropy-unseen-rays", str(unseen_rays)]
-    return ["--pipeline.model.entropy-weight", weight, *rays]
-
-
-TV_LOW = tv_weights(0.1)
-LEGO_TV4 = [*RULE_LEGO, *tv_weights(4.0)]
-"""The object rule of sessions 16-26 (TV 4), which the lego settings of sessions 20 and 25-27 vary; since session 27
-the rule also has half the components (``...-tv4-comp8``)."""
-LEGO_COMP8 = [*LEGO_TV4, *components(8, 24)]
-"""``LEGO_TV4`` with half TensoRF's components (8 density, 24 appearance): ``...-tv4-comp8``."""
-LEGO_BGWARM = [*LEGO_COMP8, *RANDOM_AFTER_UPDATE]
-"""``LEGO_COMP8`` on a random background from the first occupancy update on: ``...-tv4-comp8-bgwarm``, the object
-rule's settings today."""
-SETTINGS: dict[str, dict[str, list[str]]] = {
-    # Object scenes: the synthetic preset and the levers the issue names (weight decay, lr decay, TV, f0/Δ).
-    "lego": {
-        "preset": [],
-        "wd0": WD0,
-        "wd0.05": ["--optimizer.weight-decay", "0.05"],
-        "wd0-nodecay": WD0 + NO_DECAY,
-        "wd0-tv0.1": [*WD0, *TV_LOW],
-        "wd0-tvconst": [*WD0, *TV_CONST],
-        "wd0-lr0.04": [*WD0, "--optimizer.lr-grids", "0.04"],
-        "wd0-ramp0.5": [*WD0, "--pipeline.model.fourier.ramp-fraction", "0.5"],
-        "wd0-f0.1": [*WD0, *first_band("0.1")],
-        # Session 12: the levers left, on the val-chosen wd0-nodecay (a longer ramp, a final cutoff below 1, the
-        # occlusion term on an object).
-        "wd0-nodecay-ramp0.5": [*WD0, *NO_DECAY, RAMP, "0.5"],
-        "wd0-nodecay-ramp0.8": [*WD0, *NO_DECAY, RAMP, "0.8"],
-        "wd0-nodecay-ffinal0.7": [*WD0, *NO_DECAY, F_FINAL, "0.7"],
-        "wd0-nodecay-ffinal0.5": [*WD0, *NO_DECAY, F_FINAL, "0.5"],
-        "wd0-nodecay-occ": [*WD0, *NO_DECAY, *OCC_ON],
-        "wd0-nodecay-ramp0.5-ffinal0.7": [*WD0, *NO_DECAY, RAMP, "0.5", F_FINAL, "0.7"],
-        # Session 14: the grid learning rate, a wider first band, lighter TV, on the rule's optimiser.
-        "wd0-nodecay-lr0.04": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.04"],
-        "wd0-nodecay-lr0.01": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.01"],
-        "wd0-nodecay-f0.5": [*WD0, *NO_DECAY, *first_band("0.5")],
-        "wd0-nodecay-tv0.1": [*WD0, *NO_DECAY, *TV_LOW],
-        "wd0-nodecay-lr0.04-ramp0.5": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.04", RAMP, "0.5"],
-        # Session 15: the curriculum's own levers on the rule's settings (density and colour bands apart, a longer
-        # ramp, a final cutoff), and a higher grid lr for both.
-        "wd0-nodecay-lr0.04-ramp0.5-f0d0.1": [*RULE_LEGO, RAMP, "0.5", F0_DENSITY, "0.1"],
-        "wd0-nodecay-lr0.04-ramp0.5-f0c0.1": [*RULE_LEGO, RAMP, "0.5", F0_COLOR, "0.1"],
-        "wd0-nodecay-lr0.04-ramp0.65": [*RULE_LEGO, RAMP, "0.65"],
-        "wd0-nodecay-lr0.04-ramp0.5-ffinal0.85": [*RULE_LEGO, RAMP, "0.5", F_FINAL, "0.85"],
-        "wd0-nodecay-lr0.06": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.06"],
-        "wd0-nodecay-lr0.06-ramp0.5": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.06", RAMP, "0.5"],
-        "wd0-nodecay-lr0.04-ramp0.8": [*RULE_LEGO, RAMP, "0.8"],
-        "wd0-nodecay-lr0.04-ramp1": [*RULE_LEGO, RAMP, "1.0"],
-        "wd0-nodecay-lr0.04-ramp0.65-ffinal0.85": [*RULE_LEGO, RAMP, "0.65", F_FINAL, "0.85"],
-        # The geometry alone band-limited for good (appearance opens fully): a quarter of the filtering's cost.
-        "wd0-nodecay-lr0.04-ramp0.5-ffinald0.7": [*RULE_LEGO, RAMP, "0.5", F_FINAL, "0.7", F_FINAL_COLOR, "1.0"],
-        "wd0-nodecay-lr0.04-ramp0.5-ffinald0.5": [*RULE_LEGO, RAMP, "0.5", F_FINAL, "0.5", F_FINAL_COLOR, "1.0"],
-        # TV weight around the preset's 1.0 (0.1 lost 2 dB), for both methods at the rule's grid lr.
-        "wd0-nodecay-lr0.04-tv2": [*RULE_LEGO, *tv_weights(2.0)],
-        "wd0-nodecay-lr0.04-ramp0.5-tv2": [*RULE_LEGO, RAMP, "0.5", *tv_weights(2.0)],
-        "wd0-nodecay-lr0.04-tv0.5": [*RULE_LEGO, *tv_weights(0.5)],
-        "wd0-nodecay-lr0.04-ramp0.5-tv0.5": [*RULE_LEGO, RAMP, "0.5", *tv_weights(0.5)],
-        "wd0-nodecay-lr0.04-tv3": [*RULE_LEGO, *tv_weights(3.0)],
-        "wd0-nodecay-lr0.04-tv4": LEGO_TV4,
-        "wd0-nodecay-lr0.04-tv6": [*RULE_LEGO, *tv_weights(6.0)],
-        "wd0-nodecay-lr0.04-tv8": [*RULE_LEGO, *tv_weights(8.0)],
-        # The raw factors start inside the f0 band (no initial noise waiting outside it).
-        "wd0-nodecay-lr0.04-inband": [*RULE_LEGO, *IN_BAND],
-        "wd0-nodecay-lr0.04-ramp0.5-inband": [*RULE_LEGO, RAMP, "0.5", *IN_BAND],
-        "wd0-nodecay-lr0.04-tv2-inband": [*RULE_LEGO, *tv_weights(2.0), *IN_BAND],
-        # Session 20: RegNeRF's depth smoothness on patches from poses between the four cameras, on the rule.
-        "wd0-nodecay-lr0.04-tv4-ds1": [*LEGO_TV4, *depth_smoothness(1.0)],
-        # Session 25: the curriculum's own levers again, now on the object rule's TV 4 (tried at TV 1 before).
-        "wd0-nodecay-lr0.04-tv4-ramp0.1": [*LEGO_TV4, RAMP, "0.1"],
-        "wd0-nodecay-lr0.04-tv4-ramp0.5": [*LEGO_TV4, RAMP, "0.5"],
-        "wd0-nodecay-lr0.04-tv4-ffinal0.85": [*LEGO_TV4, F_FINAL, "0.85"],
-        "wd0-nodecay-lr0.04-tv4-f0.1": [*LEGO_TV4, *first_band("0.1")],
-        "wd0-nodecay-lr0.04-tv4-f0.5": [*LEGO_TV4, *first_band("0.5")],
-        "wd0-nodecay-lr0.06-tv4": [*WD0, *NO_DECAY, "--optimizer.lr-grids", "0.06", *tv_weights(4.0)],
-        "wd0-nodecay-lr0.04-tv4-f0.05": [*LEGO_TV4, *first_band("0.05")],
-        "wd0-nodecay-lr0.04-tv4-f0d0.1": [*LEGO_TV4, F0_DENSITY, "0.1"],
-        "wd0-nodecay-lr0.04-tv4-f0.1-ffinal0.85": [
-            *LEGO_TV4, *first_band("0.1"), F_FINAL, "0.85"],
-        # Session 26: levers outside the curriculum, for both methods: a random background behind the object's alpha
-        # (white floaters can no longer hide against the white), and half TensoRF's component counts.
-        "wd0-nodecay-lr0.04-tv4-bgrand": [*LEGO_TV4, *RANDOM_BACKGROUND],
-        # Session 29: the "holes" of f0 0.05 at 1500 iterations are opaque density outside the object's silhouette
-        # (13 val views: 3435 pixels opaque over the background against the rule's 1849; missing 179 against 188),
-        # which a white background cannot reject: a random background. It lifted f0 0.05 at 1500 from 21.56 to 23.28
-        # (seed 20211202) but emptied the field in the comp8 run at 800 (9.60) and in the P-MID run (train PSNR 12.7
-        # at step 1500, stopped), as it did tensorf-vm's (9.6 above): not usable without a guard.
-        "wd0-nodecay-lr0.04-tv4-f0.05-bgrand": [*LEGO_TV4, *first_band("0.05"), *RANDOM_BACKGROUND],
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgrand": [
-            *LEGO_COMP8, *first_band("0.05"), *RANDOM_BACKGROUND,
-        ],
-        "wd0-nodecay-lr0.04-tv4-comp8": [*LEGO_COMP8],
-        "wd0-nodecay-lr0.04-tv6-comp8": [*RULE_LEGO, *tv_weights(6.0), *components(8, 24)],
-        "wd0-nodecay-lr0.04-tv4-comp4": [*LEGO_TV4, *components(4, 12)],
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.1": [*LEGO_COMP8, *first_band("0.1")],
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.05": [*LEGO_COMP8, *first_band("0.05")],
-        # Session 26: a band that stops short of the whole spectrum at P-MID, where 2400 iterations follow the ramp.
-        "wd0-nodecay-lr0.04-tv4-ffinald0.7": [*LEGO_TV4, F_FINAL, "0.7", F_FINAL_COLOR, "1.0"],
-        # Session 27: the final grid from step 8 (one upsample at 1 % of the run) instead of TensoRF's 64³ -> 128³ over
-        # two upsamples: the band's opening is then the only coarse-to-fine schedule, where a bare TensoRF overfits.
-        "wd0-nodecay-lr0.04-tv4-comp8-up0.01": [*LEGO_COMP8, *EARLY_FINAL_GRID],
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-up0.01": [
-            *LEGO_COMP8, *first_band("0.05"), *EARLY_FINAL_GRID],
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-ramp0.5-up0.01": [
-            *LEGO_COMP8, *first_band("0.05"), RAMP, "0.5", *EARLY_FINAL_GRID],
-        # Session 27: P-CPU's val choice lost 0.8 dB at 1500 iterations; does the initial noise waiting outside its
-        # narrow first band (weight decay 0 keeps it) explain it?
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-inband": [*LEGO_COMP8, *first_band("0.05"), *IN_BAND],
-        # Session 29: mirror boundaries (nothing wraps across the box's faces while the band is narrow), on the rule
-        # and with the narrow first band.
-        "wd0-nodecay-lr0.04-tv4-comp8-mirror": [*LEGO_COMP8, *MIRROR],
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-mirror": [*LEGO_COMP8, *first_band("0.05"), *MIRROR],
-        # Session 27: the narrow first band's renders at 1500 show holes in the body: is it the occupancy grid's first
-        # update (20 % of the run, the step the band opens fully) pruning cells the band-limited field has not filled?
-        "wd0-nodecay-lr0.04-tv4-f0.05-alphamask0.3": [*LEGO_TV4, *first_band("0.05"), *LATE_ALPHA_MASK],
-        "wd0-nodecay-lr0.04-tv4-alphamask0.3": [*LEGO_TV4, *LATE_ALPHA_MASK],
-        # Session 28: the regime the paper says the curriculum is for, a grid finer than the images need (P-CPU's
-        # 100x100 views on 96³ -> 192³ and 128³ -> 256³ instead of 64³ -> 128³), where TensoRF should overfit first.
-        # Session 30: why a random background empties a field (comp8 at 800, tensorf-vm at seed 20211202): the field
-        # never lit (train PSNR 13 from step 50, density L1 down 20x by step 50). Is it the density L1 winning over
-        # the weaker, noisier pull of object pixels on a random background?
-        "wd0-nodecay-lr0.04-tv4-bgrand-l1off": [*LEGO_TV4, *RANDOM_BACKGROUND, *L1_OFF],
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgrand-l1off": [
-            *LEGO_COMP8, *first_band("0.05"), *RANDOM_BACKGROUND, *L1_OFF],
-        # It is (both lit and ended at 21.64 and 23.19 without it). Which part helps: the L1's absence or the random
-        # background, and does the L1 once the field has lit (from the first occupancy update) empty it again?
-        "wd0-nodecay-lr0.04-tv4-comp8-l1off": [*LEGO_COMP8, *L1_OFF],
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-l1off": [*LEGO_COMP8, *first_band("0.05"), *L1_OFF],
-        "wd0-nodecay-lr0.04-tv4-comp8-bgrand-l1off": [*LEGO_COMP8, *RANDOM_BACKGROUND, *L1_OFF],
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgrand-l1late": [
-            *LEGO_COMP8, *first_band("0.05"), *RANDOM_BACKGROUND, *L1_LATE],
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.03-bgrand-l1off": [
-            *LEGO_COMP8, *first_band("0.03"), *RANDOM_BACKGROUND, *L1_OFF],
-        "wd0-nodecay-lr0.04-tv4-f0.05-bgrand-l1off": [*LEGO_TV4, *first_band("0.05"), *RANDOM_BACKGROUND, *L1_OFF],
-        # Session 30: both random-background runs at P-MID (no L1: val 20.99; L1 from the first occupancy update:
-        # 21.71, against the rule's 22.50) kept the fog a fresh field starts with wherever no training ray crosses the
-        # background: the occupancy box did not shrink (2.5 x 3.0 x 2.2 against 1.5 x 2.6 x 1.8) and coloured floaters
-        # showed at its edges. So the random background now starts after the first occupancy update (white and
-        # TensoRF's L1 before it): the field lights, the L1 clears the fog, the box shrinks.
-        "wd0-nodecay-lr0.04-tv4-bgwarm": [*LEGO_TV4, *RANDOM_AFTER_UPDATE],
-        "wd0-nodecay-lr0.04-tv4-comp8-bgwarm": [*LEGO_BGWARM],
-        # Session 45: the density curriculum on x and y only (fern's image plane; on lego z is up, not depth).
-        "wd0-nodecay-lr0.04-tv4-comp8-bgwarm-zfree": [*LEGO_BGWARM, *DENSITY_XY],
-        # Session 46: the colour's first band alone: open from the first step (the curriculum on the geometry only), or
-        # narrower than the density's 0.3.
-        **{
-            f"wd0-nodecay-lr0.04-tv4-comp8-bgwarm-f0c{name}": [
-                *LEGO_BGWARM, F0_COLOR, f0,
-            ]
-            for name, f0 in (("1", "1.0"), ("0.1", "0.1"), ("0.05", "0.05"))
-        },
-        # ... and the colour band held below the spectrum to the end (the geometry's opens fully).
-        **{
-            f"wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ffinalc{f}": [
-                *LEGO_BGWARM, F_FINAL_COLOR, f,
-            ]
-            for f in ("0.7", "0.5")
-        },
-        "wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm": [
-            *LEGO_COMP8, *first_band("0.05"), *RANDOM_AFTER_UPDATE],
-        # Session 47: mip-NeRF 360's distortion loss on each method's val choice: fourierf-vm 23.17 at 0.01 and 22.16
-        # at 0.1 against 23.18.
-        **{
-            f"wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-dist{w}": [
-                *LEGO_COMP8, *first_band("0.05"), *RANDOM_AFTER_UPDATE, *distortion(w),
-            ]
-            for w in ("0.001", "0.01", "0.1")
-        },
-        **{
-            f"wd0-nodecay-lr0.04-tv4-comp8-bgwarm-dist{w}": [
-                *LEGO_BGWARM, *distortion(w),
-            ]
-            for w in ("0.001", "0.01", "0.1")
-        },
-        # Session 59: InfoNeRF's ray entropy on each method's val choice. Session 61: the second group's 0.00003 on
-        # fourierf-vm too (the object rule's own settings, which then took the entropy for objects). Session 62: both
-        # groups' 0.00003 at 1040 and 1500 iterations (``pcpu1040``, ``pcpu1500``), where the first band of 0.05 lost,
-        # so the object rule takes it at 800 iterations only.
-        **{
-            f"wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-ent{w}": [
-                *LEGO_COMP8, *first_band("0.05"), *RANDOM_AFTER_UPDATE, *entropy(w),
-            ]
-            for w in ("0.00001", "0.00003", "0.0001", "0.0003", "0.001")
-        },
-        **{
-            f"wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ent{w}": [
-                *LEGO_BGWARM, *entropy(w),
-            ]
-            for w in ("0.00001", "0.00003", "0.0001", "0.0003", "0.001")
-        },
-        # Session 63: the narrow first band's neighbours at 800 iterations on the rule with the entropy (0.05 won
-        # there by 0.23 val over the paper's 0.3): a narrower or wider band, the band open sooner or later, the
-        # geometry's band narrow and the colour's at the paper's 0.3.
-        **{
-            f"wd0-nodecay-lr0.04-tv4-comp8-f{f0}-bgwarm-ent0.00003": [
-                *LEGO_COMP8, *first_band(f0), *RANDOM_AFTER_UPDATE, *entropy("0.00003"),
-            ]
-            for f0 in ("0.02", "0.1")
-        },
-        **{
-            f"wd0-nodecay-lr0.04-tv4-comp8-f0.05-ramp{r}-bgwarm-ent0.00003": [
-                *LEGO_COMP8, *first_band("0.05"), RAMP, r, *RANDOM_AFTER_UPDATE, *entropy("0.00003"),
-            ]
-            for r in ("0.1", "0.3")
-        },
-        "wd0-nodecay-lr0.04-tv4-comp8-f0d0.05-bgwarm-ent0.00003": [
-            *LEGO_COMP8, F0_DENSITY, "0.05", *RANDOM_AFTER_UPDATE, *entropy("0.00003"),
-        ],
-        # ... and the TV weight on the narrow band (the curriculum is a smoothness prior too: does it want less?).
-        **{
-            f"wd0-nodecay-lr0.04-tv{tv}-comp8-f0.05-bgwarm-ent0.00003": [
-                *RULE_LEGO, *tv_weights(float(tv)), *components(8, 24), *first_band("0.05"), *RANDOM_AFTER_UPDATE,
-                *entropy("0.00003"),
-            ]
-            for tv in (2, 3, 6)
-        },
-        # Session 64: TV 6 on the narrow band led seed 20211202 (23.48 against TV 4's 23.33), so tensorf-vm's rule at
-        # TV 6 and 8 with the entropy too: one TV for both methods, or none moves.
-        **{
-            f"wd0-nodecay-lr0.04-tv{tv}-comp8-bgwarm-ent0.00003": [
-                *RULE_LEGO, *tv_weights(float(tv)), *components(8, 24), *RANDOM_AFTER_UPDATE, *entropy("0.00003"),
-            ]
-            for tv in (6, 8)
-        },
-        # Session 60: how many unseen rays the entropy at 0.00003 scores (1024 above, InfoNeRF's; 0 = training rays
-        # only), on each method's P-CPU val choice.
-        **{
-            f"wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-ent0.00003-u{n}": [
-                *LEGO_COMP8, *first_band("0.05"), *RANDOM_AFTER_UPDATE, *entropy("0.00003", n),
-            ]
-            for n in (0, 256, 4096)
-        },
-        **{
-            f"wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ent0.00003-u{n}": [*LEGO_BGWARM, *entropy("0.00003", n)]
-            for n in (0, 256, 4096)
-        },
-        "wd0-nodecay-lr0.04-tv6-bgwarm": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_AFTER_UPDATE],
-        # Session 60: the entropy at P-CPU's val-chosen weight on tensorf-vm's P-MID choice (fourierf-vm's P-MID choice
-        # with it is above).
-        "wd0-nodecay-lr0.04-tv6-bgwarm-ent0.00003": [
-            *RULE_LEGO, *tv_weights(6.0), *RANDOM_AFTER_UPDATE, *entropy("0.00003")],
-        # Session 32: TensoRF's TV need at P-HIGH's image and grid (TV 6 won at P-MID's, TV 4 at P-CPU's).
-        # Session 33: TV 14, past TV 10 where TensoRF's val still rose, on the same 300³ grid (pmid300). Session 35:
-        # TV 12 at P-HIGH (its val rose to TV 10 there), with fourierf-vm's TV 8 below, so both searches are two-sided.
-        # Session 38: TV 14 at P-HIGH on three seeds (TV 12, the three-seed choice, was the top); it won (22.10).
-        # Session 39: TV 16, as TV 14 was again the top tried and TensoRF's three-seed val still rose; it lost on both
-        # seeds it ran (21.07, 21.83 against TV 14's 21.33, 22.57), so TV 14 is the peak.
-        **{
-            f"wd0-nodecay-lr0.04-tv{tv}-bgwarm": [*RULE_LEGO, *tv_weights(float(tv)), *RANDOM_AFTER_UPDATE]
-            for tv in (8, 10, 12, 14, 16)
-        },
-        # fourierf-vm TV steps above its TV 4 (its val choice at every size up to P-MID), on the 300³ grid; session 34:
-        # TV 8 and tensorf-vm's TV 12, as TV 6 (fourierf-vm's best) was the top of its tried range; TV 10 and 12, as
-        # TV 8 (val 23.03 over three seeds, TV 6 22.83) was again the top. Session 40: tensorf-vm's P-HIGH choice
-        # (TV 14) on the object rule's half components, which its P-HIGH search had left at TensoRF's 16 / 48 while
-        # fourierf-vm's ran on 8 / 24 (and fourierf-vm's TV 12 on 16 / 48 above): seed 20211202 val 22.59 against
-        # 21.33 on 16 / 48 (fourierf-vm 22.57 against 22.45). Session 42: TV 16, so tensorf-vm's P-HIGH search on 8 / 24
-        # can be two-sided (run in session 43, below); on pmid300's first seed TV 10, 12, 14 on 8 / 24 read val
-        # 22.53, 22.47, 22.50, and TV 12 over three seeds 22.72 against 22.51 on 16 / 48, tensorf-vm's choice there.
-        # Session 43: at P-HIGH on 8 / 24 tensorf-vm's seed 20211202 reads TV 10 22.05, 12 22.70, 14 22.59, 16 22.26,
-        # and TV 12 over three seeds 22.51 against TV 14's 22.40, its choice; fourierf-vm's TV 16 (its TV 4-12 flat)
-        # read 22.55 against TV 12's 22.45 on that seed, but 22.40 over three seeds against TV 12's 22.44, so TV 12
-        # stays fourierf-vm's choice. Session 44: pmid300 tensorf-vm TV 10 and 14 on 8 / 24, seeds 1 and 2 (level with
-        # TV 12 on the first seed): val 23.22, 22.85 and 22.64, 22.87, so over three seeds TV 10 (22.87) overtakes TV 12
-        # (22.72) and TV 14 (22.67) as its choice, and the gap falls from +0.50 to +0.24 dB test.
-        # TV 8 on seeds 20211202 and 1 (val 21.11, 22.99) falls below TV 10 on both, so that search is two-sided.
-        **{
-            f"wd0-nodecay-lr0.04-tv{tv}-comp8-bgwarm": [
-                *RULE_LEGO, *tv_weights(float(tv)), *components(8, 24), *RANDOM_AFTER_UPDATE]
-            for tv in (6, 8, 10, 12, 14, 16)
-        },
-        # tensorf-vm's P-MID choice (TV 6) with the same random background and no L1: does TensoRF, which overfits
-        # more at P-MID, gain from it there (it lost at P-CPU: 22.80 -> 22.13)?
-        "wd0-nodecay-lr0.04-tv6-bgrand-l1off": [*RULE_LEGO, *tv_weights(6.0), *RANDOM_BACKGROUND, *L1_OFF],
-        **{
-            f"wd0-nodecay-lr0.04-tv4-comp8-g{final}": [*LEGO_COMP8, *grid(final // 2, final)]
-            for final in (192, 256)
-        },
-    },
-    # Forward-facing scenes: the real-scene preset (the trainer applies it), its grid lr, the occlusion term, f0/Δ,
-    # Floaters-No-More gradient scaling.
-    "fern": {
-        "preset": [],
-        "lr0.04": ["--optimizer.lr-grids", "0.04"],
-        "lr0.08": ["--optimizer.lr-grids", "0.08"],
-        "lr0.08-tvconst": ["--optimizer.lr-grids", "0.08", *TV_CONST],
-        "lr0.08-occ0.1": ["--optimizer.lr-grids", "0.08", *occlusion("0.1")],
-        "lr0.08-occ0": ["--optimizer.lr-grids", "0.08", *occlusion("0")],
-        "lr0.08-ramp0.5": ["--optimizer.lr-grids", "0.08", "--pipeline.model.fourier.ramp-fraction", "0.5"],
-        "lr0.08-ramp0.25": ["--optimizer.lr-grids", "0.08", RAMP, "0.25"],
-        "lr0.08-fnm": ["--optimizer.lr-grids", "0.08", *FNM],
-        "lr0.08-tvconst-fnm": ["--optimizer.lr-grids", "0.08", *TV_CONST, *FNM],
-        "lr0.08-tvconst-ramp0.5": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.5"],
-        "lr0.08-tvconst-ffinal0.7": ["--optimizer.lr-grids", "0.08", *TV_CONST, F_FINAL, "0.7"],
-        # Session 13: with Floaters-No-More keeping density off the cameras, does a shorter band limit pay?
-        "lr0.08-tvconst-fnm-ramp0.5": ["--optimizer.lr-grids", "0.08", *TV_CONST, *FNM, RAMP, "0.5"],
-        "lr0.08-tvconst-fnm-ramp0.25": ["--optimizer.lr-grids", "0.08", *TV_CONST, *FNM, RAMP, "0.25"],
-        # Session 14: at 3000 iterations the band opens only at the end; a quarter of the run opens it by step 750.
-        "lr0.08-tvconst-ramp0.25": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.25"],
-        # Session 16: TV 4 won on lego for both methods; does a stronger TV term carry to a forward-facing scene?
-        "lr0.08-tvconst-tv2": ["--optimizer.lr-grids", "0.08", *TV_CONST, *tv_weights(2.0)],
-        "lr0.08-tvconst-tv4": FERN_TV4,
-        # Session 17: the forward-facing rule at 3000 iterations (band open by step 800: 800 / 3000).
-        "lr0.08-tvconst-ramp0.2667": ["--optimizer.lr-grids", "0.08", *TV_CONST, RAMP, "0.2667"],
-        "lr0.08-tvconst-ramp0.2667-tv4": FERN_PMID_RULE,
-        # Session 18: Floaters-No-More (tensorf-vm's val choice at 800 iterations, TV 1) on top of TV 4.
-        "lr0.08-tvconst-tv4-fnm": [*FERN_TV4, *FNM],
-        # Session 19: the same for fourierf-vm at 3000 iterations, with the rule's ramp (band open by step 800).
-        "lr0.08-tvconst-ramp0.2667-tv4-fnm": [*FERN_PMID_RULE, *FNM],
-        # Session 20: RegNeRF's depth smoothness on 8×8 patches from poses between the training cameras, on the rule.
-        **{
-            f"lr0.08-tvconst-tv4-ds{weight}": [*FERN_TV4, *depth_smoothness(weight)] for weight in (0.1, 1, 10)
-        },
-        # Session 23: around the P-MID choice on seeds 1 and 2 (one GPU call): a stronger TV, a band open by step 450.
-        "lr0.08-tvconst-ramp0.2667-tv6": fern_rule("0.2667", tv=6.0),
-        "lr0.08-tvconst-ramp0.15-tv4": fern_rule("0.15"),
-        # Session 23: the choice under the two other ReLU rules (dead_start.py): revive every dark batch, TensoRF's.
-        "lr0.08-tvconst-ramp0.2667-tv4-revive1": [*FERN_PMID_RULE, *REVIVE1],
-        # Session 45: the density curriculum on the image plane only (``DENSITY_XY``), on the rule's settings at
-        # 3000 and 1500 iterations.
-        "lr0.08-tvconst-ramp0.2667-tv4-revive1-zfree": [*FERN_PMID_RULE, *REVIVE1, *DENSITY_XY],
-        # (Session 47, a throwaway prototype not kept: z's band at the square root of the cutoff, between every axis
-        # and z unfiltered, read 20.11 at 800 iterations against 20.51, and 21.36 / 20.87 / 19.91 at 3000 against the
-        # rule's 21.19 / 20.71 / 21.02.)
-        "lr0.08-tvconst-ramp0.5333-tv4-revive1-zfree": [*fern_rule("0.5333"), *REVIVE1, *DENSITY_XY],
-        "lr0.08-tvconst-ramp0.2667-tv4-plain": [*FERN_PMID_RULE, *PLAIN_RELU],
-        # Session 24: Floaters-No-More once the band is open (step 800), when the field trains like TensoRF's, which it
-        # helps; against the whole run.
-        "lr0.08-tvconst-ramp0.2667-tv4-revive1-fnm": [*FERN_PMID_RULE, *REVIVE1, *FNM],
-        "lr0.08-tvconst-ramp0.2667-tv4-revive1-fnmlate": [*FERN_PMID_RULE, *REVIVE1, *FNM, FNM_FROM, "0.2667"],
-        # Session 24: a band that stops short of the whole spectrum, so the field cannot drift to TensoRF's solution
-        # over the 2200 iterations after the ramp: both grids at 0.85, or the geometry alone at 0.7.
-        "lr0.08-tvconst-ramp0.2667-tv4-revive1-ffinal0.85": [*FERN_PMID_RULE, *REVIVE1, F_FINAL, "0.85"],
-        "lr0.08-tvconst-ramp0.2667-tv4-revive1-ffinald0.7": [
-            *FERN_PMID_RULE, *REVIVE1, F_FINAL, "0.7", F_FINAL_COLOR, "1.0",
-        ],
-        # Session 24: a wider first band (the real preset's f0 is 0.01: little more than the mean), and half the grid lr
-        # for the longer run.
-        "lr0.08-tvconst-ramp0.2667-tv4-revive1-f0.05": [
-            *FERN_PMID_RULE, *REVIVE1, *first_band("0.05"),
-        ],
-        "lr0.04-tvconst-ramp0.2667-tv4-revive1": [*fern_rule("0.2667", lr="0.04"), *REVIVE1],
-        # Session 24: the budget rule at 1500 iterations (band open by step 800), waiting for a fresh field or reviving
-        # at once, for both methods.
-        "lr0.08-tvconst-ramp0.5333-tv4": fern_rule("0.5333"),
-        "lr0.08-tvconst-ramp0.5333-tv4-revive1": [*fern_rule("0.5333"), *REVIVE1],
-        "lr0.08-tvconst-tv4-revive1": [*FERN_TV4, *REVIVE1],
-        # Session 46: the short-run rule's TV 6 at 1500 iterations, for both methods (its boundary is 800).
-        "lr0.08-tvconst-ramp0.5333-tv6-revive1": [*fern_rule("0.5333", tv=6.0), *REVIVE1],
-        "lr0.08-tvconst-tv6-revive1": [*fern_tv(6), *REVIVE1],
-        # ... and at 3000 iterations the band open by step 1500 instead of 800.
-        "lr0.08-tvconst-ramp0.5-tv4-revive1": [*fern_rule("0.5"), *REVIVE1],
-        # Session 26: half TensoRF's component counts (lego's object rule gained 0.14 dB over 3 seeds at P-CPU) on
-        # fourierf-vm's P-CPU choice.
-        "lr0.08-tvconst-tv4-comp8": [*FERN_TV4, *components(8, 24)],
-        # Session 28: Floaters-No-More lifts tensorf-vm past fourierf-vm (P-CPU val 20.69 against 20.05) but not
-        # fourierf-vm, whose narrow band holds the near leaves back while FNM slows them too: FNM with a band that
-        # opens early (by 5-25 % of the run) or starts wider.
-        **{f"lr0.08-tvconst-tv4-fnm-ramp{r}": [*FERN_TV4, *FNM, RAMP, r] for r in ("0.05", "0.1", "0.25")},
-        "lr0.08-tvconst-tv4-fnm-f0.3-ramp0.1": [*FERN_TV4, *FNM, *first_band("0.3"), RAMP, "0.1"],
-        # Session 28: seeds 1 and 2 of fnm-ramp0.1 stalled at train PSNR ~17 with 19 % and 33 % of the occupancy grid
-        # kept (69 % on seed 20211202): is it the single occupancy update at 10 % (step 80) pruning a field not yet lit?
-        "lr0.08-tvconst-tv4-fnm-ramp0.1-alphamask0.25": [*FERN_TV4, *FNM, RAMP, "0.1", *OCCUPANCY_AT_STEP_200],
-        # ... and the same later update on each method's P-CPU choice: what does it cost where the update at step 80
-        # did not prune a dim field? (The budget rule's since session 28.)
-        "lr0.08-tvconst-tv4-alphamask0.25": [*fern_short(4.0)],
-        "lr0.08-tvconst-tv4-fnm-alphamask0.25": [*FERN_TV4, *FNM, *OCCUPANCY_AT_STEP_200],
-        # Session 29: the filters' periodic wrap puts NDC's far wall (z = 1) onto the near plane (z = -1) while the
-        # band is narrow; fourierf-vm shows a near blob tensorf-vm lacks (the hanging frond, as it turned out): mirror
-        # boundaries instead, with and
-        # without Floaters-No-More.
-        "lr0.08-tvconst-tv4-alphamask0.25-mirror": [*fern_short(4.0), *MIRROR],
-        "lr0.08-tvconst-tv4-fnm-alphamask0.25-mirror": [*FERN_TV4, *FNM, *OCCUPANCY_AT_STEP_200, *MIRROR],
-        # Session 29: a band open by step 80 still cost ~1 dB beside FNM (fnm-ramp0.1 above; FNM on density growth
-        # alone collapsed every run to ~16 dB, not kept): FNM from the step the band is open, as the paper applies
-        # FNM to TensoRF.
-        **{
-            f"lr0.08-tvconst-tv4-fnm-ramp{r}-fnmfrom{r}-alphamask0.25": [
-                *FERN_TV4, *FNM, RAMP, r, FNM_FROM, r, *OCCUPANCY_AT_STEP_200,
-            ]
-            for r in ("0.1", "0.25")
-        },
-        # Session 29: fourierf-vm's fern renders are softer than tensorf-vm's with Floaters-No-More: the curriculum on
-        # the geometry alone (the appearance grids unfiltered from step 0), with and without FNM.
-        "lr0.08-tvconst-tv4-alphamask0.25-f0c1": [*fern_short(4.0), F0_COLOR, "1.0"],
-        "lr0.08-tvconst-tv4-fnm-alphamask0.25-f0c1": [*FERN_TV4, *FNM, *OCCUPANCY_AT_STEP_200, F0_COLOR, "1.0"],
-        # Session 45: fourierf-vm's fern fits are soft in depth, where three views pin a surface down and the band
-        # holds it back: the density curriculum on the image plane only (x and y; NDC depth z unfiltered), with and
-        # without FNM. (A throwaway prototype that held z's band narrower than x's and y's lost: half the cutoff
-        # 19.64, the cutoff squared 19.89, against 20.08 on seed 20211202.)
-        "lr0.08-tvconst-tv4-alphamask0.25-zfree": [*fern_short(4.0), *DENSITY_XY],
-        "lr0.08-tvconst-tv4-fnm-alphamask0.25-zfree": [*FERN_TV4, *FNM, *OCCUPANCY_AT_STEP_200, *DENSITY_XY],
-        # ... and on it the levers its new field may want otherwise: mirror boundaries (x and y only now wrap), and
-        # the TV weight chosen without it (4) a step or two either way.
-        "lr0.08-tvconst-tv4-alphamask0.25-zfree-mirror": [*fern_short(4.0), *DENSITY_XY, *MIRROR],
-        **{
-            f"lr0.08-tvconst-tv{tv}-alphamask0.25-zfree": fern_image_plane(tv)
-            for tv in (2, 6, 8)
-        },
-        # ... and, since fourierf-vm's best val mean moved to TV 6 there, tensorf-vm's val choice (TV 4 with FNM) at
-        # TV 6 as well, so neither method's TV search stops a step short of the other's.
-        "lr0.08-tvconst-tv6-fnm-alphamask0.25": [*fern_tv(6), *FNM, *OCCUPANCY_AT_STEP_200],
-        # ... and plain tensorf-vm, the rule's other method, at the rule's TV 4 and at TV 6 (its share of a TV rule).
-        "lr0.08-tvconst-tv6-alphamask0.25": [*fern_short(6)],
-        # Session 46: on the image-plane curriculum at TV 6, the band's start and speed searched again (the preset's
-        # f0 0.01 and whole-run ramp were chosen with every axis filtered), the grid lr and depth smoothness, and the
-        # density band open from the start (appearance curriculum only). (Throwaway prototypes, not kept, filtered the
-        # appearance on x and y only, 18.72, or on z only, 19.75, or held its z band at the cutoff squared, 20.35, or
-        # cubed, 20.07, against 20.51.)
-        **{
-            f"lr0.08-tvconst-tv6-alphamask0.25-zfree-f0d{f0}": [
-                *fern_image_plane(6), F0_DENSITY, f0,
-            ]
-            for f0 in ("0.05", "0.1")
-        },
-        "lr0.08-tvconst-tv6-alphamask0.25-zfree-ramp0.75": [
-            *fern_image_plane(6), RAMP, "0.75",
-        ],
-        "lr0.08-tvconst-tv6-alphamask0.25-f0d1": [*fern_short(6), F0_DENSITY, "1.0"],
-        # ... and Floaters-No-More, tensorf-vm's lever, which with every axis filtered did nothing for fourierf-vm and
-        # with z unfiltered at TV 4 fell to 17.78: from the first step, and from step 400 on.
-        "lr0.08-tvconst-tv6-fnm-alphamask0.25-zfree": [*fern_image_plane(6), *FNM],
-        "lr0.08-tvconst-tv6-fnm-fnmfrom0.5-alphamask0.25-zfree": [
-            *fern_image_plane(6), *FNM, FNM_FROM, "0.5",
-        ],
-        "lr0.12-tvconst-tv6-alphamask0.25-zfree": [
-            *fern_image_plane(6, lr="0.12"),
-        ],
-        "lr0.08-tvconst-tv6-alphamask0.25-zfree-ds1": [
-            *fern_image_plane(6), *depth_smoothness(1.0),
-        ],
-        # Session 47: mip-NeRF 360's distortion loss (one short interval of weight per ray), against the ghosting and
-        # doubled geometry, on each method's rule and on tensorf-vm's val choice (FNM). fourierf-vm fell at every
-        # weight (20.51 -> 19.97, 19.22, 16.01), tensorf-vm with FNM tied at 0.001 (20.70 -> 20.67).
-        **{
-            f"lr0.08-tvconst-tv6-alphamask0.25-zfree-dist{w}": [*fern_image_plane(6), *distortion(w)]
-            for w in ("0.001", "0.01", "0.1")
-        },
-        **{
-            f"lr0.08-tvconst-tv6-alphamask0.25-dist{w}": [*fern_short(6), *distortion(w)]
-            for w in ("0.001", "0.01", "0.1")
-        },
-        **{
-            f"lr0.08-tvconst-tv4-fnm-dist{w}": [*FERN_TV4, *FNM, *distortion(w)]
-            for w in ("0.001", "0.01", "0.1")
-        },
-        # Session 59: InfoNeRF's ray entropy on each method's P-CPU val choice, against the same ghosting.
-        **{
-            f"lr0.08-tvconst-tv6-alphamask0.25-zfree-ent{w}": [*fern_image_plane(6), *entropy(w)]
-            for w in ("0.00003", "0.0001", "0.001")
-        },
-        **{
-            f"lr0.08-tvconst-tv6-fnm-alphamask0.25-ent{w}": [*fern_tv(6), *FNM, *OCCUPANCY_AT_STEP_200, *entropy(w)]
-            for w in ("0.00003", "0.0001", "0.001")
-        },
-        # ... and tensorf-vm's val choice under TensoRF's plain ReLU: its recorded rows (commit 71362f1) predate the
-        # reviving ReLU, and a rerun under the current default read val 20.14 against the recorded 20.70. Plain reads
-        # 20.14 too, so the revival is not what moved it; the thread count is (the docstring; docs/few-shot-quality.md).
-        "lr0.08-tvconst-tv4-fnm-plain": [*FERN_TV4, *FNM, *PLAIN_RELU],
-        # ... and FreeNeRF's occlusion weight (0.01, the preset's) off, tripled and tenfold on the image-plane rule:
-        # 20.22, 20.59, 20.48 against 20.51; 0.03 on seed 1 19.54 against 19.86, so 0.01 stays.
-        **{
-            f"lr0.08-tvconst-tv6-alphamask0.25-zfree-occ{w}": [
-                *fern_image_plane(6), *occlusion(w),
-            ]
-            for w in ("0", "0.03", "0.1")
-        },
-    },
+FNM, FNM_FROM = "--pipeline.model.floaters-gradient-scaling", "--pipeline.model.floaters-gradient-scaling-from"
+L1_INITIAL, L1_REST = "--pipeline.model.l1-weight-initial", "--pipeline.model.l1-weight-rest"
+BACKGROUND = "--pipeline.effects.background"
+OCCUPANCY = "--pipeline.model.occupancy-update-fractions"
+TOKENS: dict[str, list[str]] = {
+    "preset": [],  # the preset as the trainer builds it (the budget rule off, as for every setting)
+    "nodecay": ["--optimizer.lr-decay-ratio", "1.0"],
+    "tvconst": ["--pipeline.model.tv-decay-ratio", "1.0"],
+    "occ": ["--pipeline.effects.occlusion-regularization", "True"],
+    "fnm": [FNM, "True"],  # Floaters-No-More's gradient scaling
+    "fnmlate": [FNM, "True", FNM_FROM, "0.2667"],  # ... from the step a 3000-iteration run's band is open (step 800)
+    "inband": ["--pipeline.model.fourier.init-in-band", "True"],  # the raw factors start inside the first band
+    "bgrand": [BACKGROUND, "random", "--pipeline.model.random-background-from", "0"],  # from the first step
+    "bgwarm": [BACKGROUND, "random"],  # from the step after the first occupancy update, white before
+    "mirror": ["--pipeline.model.fourier.boundary", "mirror"],
+    "l1off": [L1_INITIAL, "0", L1_REST, "0"],
+    "l1late": [L1_INITIAL, "0"],  # no density L1 before the first occupancy update
+    "plain": ["--pipeline.model.field.revive-dead-density", "False"],  # TensoRF's ReLU for the density
+    "zfree": ["--pipeline.model.fourier.density-axes", "0", "1"],  # the density's band on x and y only
+    "alphamask0.25": [OCCUPANCY, "0.25"],  # one occupancy update, at 25 % of the run
+    "alphamask0.3": [OCCUPANCY, "0.3", "0.5"],  # two, at 30 % and 50 %
+    "up0.01": ["--pipeline.model.field.upsample-fractions", "0.01"],  # the final grid from 1 % of the run on
+}
+"""The tokens of a setting's name that stand for fixed flags."""
+VALUED: dict[str, Callable[[str], list[str]]] = {  # a prefix and a number: ``tv4``, ``f0d0.1``
+    "wd": lambda v: ["--optimizer.weight-decay", v],
+    "lr": lambda v: ["--optimizer.lr-grids", v],
+    "tv": lambda v: ["--pipeline.model.tv-weight-density", v, "--pipeline.model.tv-weight-appearance", v],
+    "ramp": lambda v: [RAMP, v],  # the fraction of the run over which the band opens
+    "f": lambda v: [F0_DENSITY, v, F0_COLOR, v],  # both grids' first band
+    "f0d": lambda v: [F0_DENSITY, v],
+    "f0c": lambda v: [F0_COLOR, v],
+    "ffinal": lambda v: [F_FINAL, v],  # the band's final cutoff
+    "ffinald": lambda v: [F_FINAL, v, F_FINAL_COLOR, "1.0"],  # ... of the geometry alone
+    "ffinalc": lambda v: [F_FINAL_COLOR, v],  # ... of the colour alone
+    "comp": lambda v: [  # density components per plane/line group, three times as many for appearance
+        "--pipeline.model.field.density-components", *[v] * 3,
+        "--pipeline.model.field.appearance-components", *[str(3 * int(v))] * 3,
+    ],
+    "g": lambda v: [  # the final grid side, from half of it
+        "--pipeline.model.field.n-voxels-init", str((int(v) // 2) ** 3),
+        "--pipeline.model.field.n-voxels-final", str(int(v) ** 3),
+    ],
+    "revive": lambda v: ["--pipeline.model.field.revive-patience", v],  # dark batches before a dead density revives
+    "fnmfrom": lambda v: [FNM_FROM, v],
+    "occ": lambda v: ["--pipeline.model.occlusion-weight", v],  # FreeNeRF's occlusion term
+    "ds": lambda v: ["--pipeline.model.depth-smoothness-weight", v],  # RegNeRF's depth smoothness
+    "dist": lambda v: ["--pipeline.model.distortion-weight", v],  # mip-NeRF 360's distortion loss
+    "ent": lambda v: ["--pipeline.model.entropy-weight", v],  # InfoNeRF's ray entropy
+    "u": lambda v: ["--pipeline.model.entropy-unseen-rays", v],  # ... on this many unseen rays
 }  # fmt: skip
+"""The tokens that are a prefix and a number."""
+
+
+def setting_flags(setting: str) -> list[str]:
+    """The ``fourierf-train`` flags a setting's name stands for (later flags win over the protocol's own sizes)."""
+    flags = []
+    for token in setting.split("-"):
+        if token in TOKENS:
+            flags += TOKENS[token]
+            continue
+        match = re.fullmatch(r"([a-z0-9]*?[a-z])(\d+(?:\.\d+)?)", token)
+        if match is None or match[1] not in VALUED:
+            known = f"{', '.join(TOKENS)}, or one of {', '.join(VALUED)} and a number"
+            raise ValueError(f"{setting}: no such token {token!r}; a token is {known}")
+        flags += VALUED[match[1]](match[2])
+    return flags
+
+
+def names(text: str) -> tuple[str, ...]:
+    return tuple(text.split())
+
+
+SETTINGS: dict[str, tuple[str, ...]] = {  # lego's vary the object preset, fern's the real-scene preset
+    "lego": names("""
+        preset wd0 wd0.05 wd0-nodecay wd0-tvconst wd0-ramp0.5 wd0-f0.1 wd0-nodecay-ramp0.5 wd0-nodecay-ramp0.8
+        wd0-nodecay-ffinal0.7 wd0-nodecay-ffinal0.5 wd0-nodecay-occ wd0-nodecay-ramp0.5-ffinal0.7 wd0-nodecay-lr0.04
+        wd0-nodecay-lr0.01 wd0-nodecay-f0.5 wd0-nodecay-tv0.1 wd0-nodecay-lr0.04-ramp0.5
+        wd0-nodecay-lr0.04-ramp0.5-f0d0.1 wd0-nodecay-lr0.04-ramp0.5-f0c0.1 wd0-nodecay-lr0.04-ramp0.65
+        wd0-nodecay-lr0.04-ramp0.5-ffinal0.85 wd0-nodecay-lr0.06 wd0-nodecay-lr0.06-ramp0.5 wd0-nodecay-lr0.04-ramp0.8
+        wd0-nodecay-lr0.04-ramp1 wd0-nodecay-lr0.04-ramp0.65-ffinal0.85 wd0-nodecay-lr0.04-ramp0.5-ffinald0.7
+        wd0-nodecay-lr0.04-ramp0.5-ffinald0.5 wd0-nodecay-lr0.04-tv2 wd0-nodecay-lr0.04-ramp0.5-tv2
+        wd0-nodecay-lr0.04-tv0.5 wd0-nodecay-lr0.04-ramp0.5-tv0.5 wd0-nodecay-lr0.04-tv3 wd0-nodecay-lr0.04-tv4
+        wd0-nodecay-lr0.04-tv6 wd0-nodecay-lr0.04-tv8 wd0-nodecay-lr0.04-inband wd0-nodecay-lr0.04-ramp0.5-inband
+        wd0-nodecay-lr0.04-tv2-inband wd0-nodecay-lr0.04-tv4-ds1 wd0-nodecay-lr0.04-tv4-ramp0.1
+        wd0-nodecay-lr0.04-tv4-ramp0.5 wd0-nodecay-lr0.04-tv4-ffinal0.85 wd0-nodecay-lr0.04-tv4-f0.1
+        wd0-nodecay-lr0.04-tv4-f0.5 wd0-nodecay-lr0.06-tv4 wd0-nodecay-lr0.04-tv4-f0.05 wd0-nodecay-lr0.04-tv4-f0d0.1
+        wd0-nodecay-lr0.04-tv4-f0.1-ffinal0.85 wd0-nodecay-lr0.04-tv4-bgrand wd0-nodecay-lr0.04-tv4-f0.05-bgrand
+        wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgrand wd0-nodecay-lr0.04-tv4-comp8 wd0-nodecay-lr0.04-tv6-comp8
+        wd0-nodecay-lr0.04-tv4-comp4 wd0-nodecay-lr0.04-tv4-comp8-f0.1 wd0-nodecay-lr0.04-tv4-comp8-f0.05
+        wd0-nodecay-lr0.04-tv4-ffinald0.7 wd0-nodecay-lr0.04-tv4-comp8-up0.01
+        wd0-nodecay-lr0.04-tv4-comp8-f0.05-up0.01 wd0-nodecay-lr0.04-tv4-comp8-f0.05-ramp0.5-up0.01
+        wd0-nodecay-lr0.04-tv4-comp8-f0.05-inband wd0-nodecay-lr0.04-tv4-comp8-mirror
+        wd0-nodecay-lr0.04-tv4-comp8-f0.05-mirror wd0-nodecay-lr0.04-tv4-f0.05-alphamask0.3
+        wd0-nodecay-lr0.04-tv4-alphamask0.3 wd0-nodecay-lr0.04-tv4-bgrand-l1off
+        wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgrand-l1off wd0-nodecay-lr0.04-tv4-comp8-l1off
+        wd0-nodecay-lr0.04-tv4-comp8-f0.05-l1off wd0-nodecay-lr0.04-tv4-comp8-bgrand-l1off
+        wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgrand-l1late wd0-nodecay-lr0.04-tv4-comp8-f0.03-bgrand-l1off
+        wd0-nodecay-lr0.04-tv4-f0.05-bgrand-l1off wd0-nodecay-lr0.04-tv4-bgwarm wd0-nodecay-lr0.04-tv4-comp8-bgwarm
+        wd0-nodecay-lr0.04-tv4-comp8-bgwarm-zfree wd0-nodecay-lr0.04-tv4-comp8-bgwarm-f0c1
+        wd0-nodecay-lr0.04-tv4-comp8-bgwarm-f0c0.1 wd0-nodecay-lr0.04-tv4-comp8-bgwarm-f0c0.05
+        wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ffinalc0.7 wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ffinalc0.5
+        wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-dist0.01
+        wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-dist0.1 wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-ent0.00001
+        wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-ent0.00003 wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-ent0.0001
+        wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-ent0.0003 wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-ent0.001
+        wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ent0.00001 wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ent0.00003
+        wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ent0.0001 wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ent0.0003
+        wd0-nodecay-lr0.04-tv4-comp8-f0.02-bgwarm-ent0.00003 wd0-nodecay-lr0.04-tv4-comp8-f0.1-bgwarm-ent0.00003
+        wd0-nodecay-lr0.04-tv4-comp8-f0.05-ramp0.1-bgwarm-ent0.00003
+        wd0-nodecay-lr0.04-tv4-comp8-f0.05-ramp0.3-bgwarm-ent0.00003
+        wd0-nodecay-lr0.04-tv4-comp8-f0d0.05-bgwarm-ent0.00003 wd0-nodecay-lr0.04-tv2-comp8-f0.05-bgwarm-ent0.00003
+        wd0-nodecay-lr0.04-tv3-comp8-f0.05-bgwarm-ent0.00003 wd0-nodecay-lr0.04-tv6-comp8-f0.05-bgwarm-ent0.00003
+        wd0-nodecay-lr0.04-tv6-comp8-bgwarm-ent0.00003 wd0-nodecay-lr0.04-tv8-comp8-bgwarm-ent0.00003
+        wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-ent0.00003-u0
+        wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-ent0.00003-u256
+        wd0-nodecay-lr0.04-tv4-comp8-f0.05-bgwarm-ent0.00003-u4096 wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ent0.00003-u0
+        wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ent0.00003-u256 wd0-nodecay-lr0.04-tv4-comp8-bgwarm-ent0.00003-u4096
+        wd0-nodecay-lr0.04-tv6-bgwarm wd0-nodecay-lr0.04-tv6-bgwarm-ent0.00003 wd0-nodecay-lr0.04-tv8-bgwarm
+        wd0-nodecay-lr0.04-tv10-bgwarm wd0-nodecay-lr0.04-tv12-bgwarm wd0-nodecay-lr0.04-tv14-bgwarm
+        wd0-nodecay-lr0.04-tv16-bgwarm wd0-nodecay-lr0.04-tv6-comp8-bgwarm wd0-nodecay-lr0.04-tv8-comp8-bgwarm
+        wd0-nodecay-lr0.04-tv10-comp8-bgwarm wd0-nodecay-lr0.04-tv12-comp8-bgwarm wd0-nodecay-lr0.04-tv14-comp8-bgwarm
+        wd0-nodecay-lr0.04-tv16-comp8-bgwarm wd0-nodecay-lr0.04-tv4-comp8-g192 wd0-nodecay-lr0.04-tv4-comp8-g256
+    """),
+    "fern": names("""
+        preset lr0.08 lr0.08-tvconst lr0.08-occ0.1 lr0.08-occ0 lr0.08-ramp0.25 lr0.08-tvconst-fnm
+        lr0.08-tvconst-ramp0.5 lr0.08-tvconst-ffinal0.7 lr0.08-tvconst-fnm-ramp0.5 lr0.08-tvconst-fnm-ramp0.25
+        lr0.08-tvconst-ramp0.25 lr0.08-tvconst-tv2 lr0.08-tvconst-tv4 lr0.08-tvconst-ramp0.2667
+        lr0.08-tvconst-ramp0.2667-tv4 lr0.08-tvconst-tv4-fnm lr0.08-tvconst-ramp0.2667-tv4-fnm
+        lr0.08-tvconst-tv4-ds0.1 lr0.08-tvconst-tv4-ds1 lr0.08-tvconst-tv4-ds10 lr0.08-tvconst-ramp0.2667-tv6
+        lr0.08-tvconst-ramp0.15-tv4 lr0.08-tvconst-ramp0.2667-tv4-revive1 lr0.08-tvconst-ramp0.2667-tv4-revive1-zfree
+        lr0.08-tvconst-ramp0.5333-tv4-revive1-zfree lr0.08-tvconst-ramp0.2667-tv4-plain
+        lr0.08-tvconst-ramp0.2667-tv4-revive1-fnm lr0.08-tvconst-ramp0.2667-tv4-revive1-fnmlate
+        lr0.08-tvconst-ramp0.2667-tv4-revive1-ffinal0.85 lr0.08-tvconst-ramp0.2667-tv4-revive1-ffinald0.7
+        lr0.08-tvconst-ramp0.2667-tv4-revive1-f0.05 lr0.04-tvconst-ramp0.2667-tv4-revive1
+        lr0.08-tvconst-ramp0.5333-tv4 lr0.08-tvconst-ramp0.5333-tv4-revive1 lr0.08-tvconst-tv4-revive1
+        lr0.08-tvconst-ramp0.5333-tv6-revive1 lr0.08-tvconst-tv6-revive1 lr0.08-tvconst-ramp0.5-tv4-revive1
+        lr0.08-tvconst-tv4-comp8 lr0.08-tvconst-tv4-fnm-ramp0.05 lr0.08-tvconst-tv4-fnm-ramp0.1
+        lr0.08-tvconst-tv4-fnm-ramp0.25 lr0.08-tvconst-tv4-fnm-f0.3-ramp0.1
+        lr0.08-tvconst-tv4-fnm-ramp0.1-alphamask0.25 lr0.08-tvconst-tv4-alphamask0.25
+        lr0.08-tvconst-tv4-fnm-alphamask0.25 lr0.08-tvconst-tv4-alphamask0.25-mirror
+        lr0.08-tvconst-tv4-fnm-alphamask0.25-mirror lr0.08-tvconst-tv4-fnm-ramp0.1-fnmfrom0.1-alphamask0.25
+        lr0.08-tvconst-tv4-fnm-ramp0.25-fnmfrom0.25-alphamask0.25 lr0.08-tvconst-tv4-alphamask0.25-f0c1
+        lr0.08-tvconst-tv4-fnm-alphamask0.25-f0c1 lr0.08-tvconst-tv4-alphamask0.25-zfree
+        lr0.08-tvconst-tv4-fnm-alphamask0.25-zfree lr0.08-tvconst-tv4-alphamask0.25-zfree-mirror
+        lr0.08-tvconst-tv2-alphamask0.25-zfree lr0.08-tvconst-tv6-alphamask0.25-zfree
+        lr0.08-tvconst-tv8-alphamask0.25-zfree lr0.08-tvconst-tv6-fnm-alphamask0.25 lr0.08-tvconst-tv6-alphamask0.25
+        lr0.08-tvconst-tv6-alphamask0.25-zfree-f0d0.05 lr0.08-tvconst-tv6-alphamask0.25-zfree-f0d0.1
+        lr0.08-tvconst-tv6-alphamask0.25-zfree-ramp0.75 lr0.08-tvconst-tv6-alphamask0.25-f0d1
+        lr0.08-tvconst-tv6-fnm-alphamask0.25-zfree lr0.08-tvconst-tv6-fnm-fnmfrom0.5-alphamask0.25-zfree
+        lr0.12-tvconst-tv6-alphamask0.25-zfree lr0.08-tvconst-tv6-alphamask0.25-zfree-ds1
+        lr0.08-tvconst-tv6-alphamask0.25-zfree-dist0.001 lr0.08-tvconst-tv6-alphamask0.25-zfree-dist0.01
+        lr0.08-tvconst-tv6-alphamask0.25-zfree-dist0.1 lr0.08-tvconst-tv4-fnm-dist0.001
+        lr0.08-tvconst-tv6-alphamask0.25-zfree-ent0.00003 lr0.08-tvconst-tv6-alphamask0.25-zfree-ent0.0001
+        lr0.08-tvconst-tv6-alphamask0.25-zfree-ent0.001 lr0.08-tvconst-tv6-fnm-alphamask0.25-ent0.00003
+        lr0.08-tvconst-tv6-fnm-alphamask0.25-ent0.0001 lr0.08-tvconst-tv6-fnm-alphamask0.25-ent0.001
+        lr0.08-tvconst-tv4-fnm-plain lr0.08-tvconst-tv6-alphamask0.25-zfree-occ0
+        lr0.08-tvconst-tv6-alphamask0.25-zfree-occ0.03 lr0.08-tvconst-tv6-alphamask0.25-zfree-occ0.1
+    """),
+}
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "inband", "mirror", "zfree")
 """Settings that only change the curriculum: tensorf-vm (masks off) would repeat its run, so it skips them."""
 
@@ -858,7 +426,7 @@ def execute(run: Run, scene: str, args: argparse.Namespace) -> dict:
     protocol_name, setting = run.views.split("-", 1)
     protocol = PROTOCOLS[protocol_name]
     # --budget-rule False: each run has exactly its setting's values, not the short-run rule's (method_configs.budget)
-    extra = [*protocol.flags(), "--device", args.device, "--budget-rule", "False", *SETTINGS[scene][setting]]
+    extra = [*protocol.flags(), "--device", args.device, "--budget-rule", "False", *setting_flags(setting)]
     if args.stage == "curve":  # keep a checkpoint every CURVE_EVERY iterations (the later flag wins)
         extra += ["--steps-per-save", str(CURVE_EVERY), "--keep-checkpoints", str(run.iters // CURVE_EVERY + 1)]
     data = args.data / ("blender/lego" if scene == "lego" else "llff/fern")
@@ -987,9 +555,8 @@ def chosen_setting(groups: dict[str, list[dict]]) -> str | None:
     """The setting with the best mean validation PSNR over ``SEEDS`` among those run on every seed (the seeds stage
     runs the sweep's leaders), else the best validation PSNR of the first seed (the sweep's seed).
 
-    Why the mean where there is one: one seed's val PSNR moves by about 0.15 dB from seed to seed, so the best of
-    many single-seed settings is mostly the luckiest (lego P-CPU: four settings within 0.03 dB of each other over
-    three seeds spanned 22.37-22.58 on the first)."""
+    Why the mean where there is one: one seed's val PSNR moves from seed to seed by more than many settings differ,
+    so the best of many single-seed settings is mostly the luckiest."""
     seeded = {s: vals for s, rows in groups.items() if len(vals := val_by_seed(rows)) == len(SEEDS)}
     if seeded:
         return max(seeded, key=lambda s: float(np.mean(list(seeded[s].values()))))
@@ -1102,7 +669,7 @@ def curve_table(results: dict[str, dict]) -> list[str]:
 
 
 def equal_time_lines(results: dict[str, dict]) -> list[str]:
-    """A final cutoff 0.7 costs 1.3 × the wall time at P-CPU: is it better than 1.3 × the iterations without it?"""
+    """A final cutoff 0.7 costs wall time: is it better than as many more iterations without it (``pcpu1040``)?"""
     lines = []
     for scene, setting in (("lego", "wd0-nodecay"),):
         longer = rows_by(results, scene, "pcpu1040", "fourierf-vm").get(setting, [])
@@ -1149,7 +716,7 @@ both a dark density field revived at its first dark batch), seed 20211202."""
 
 RULE_AT_800 = {
     **{(method, long): short for method, ((_, short), (_, long)) in RULE_ALONG_THE_BUDGET.items()},
-    ("fourierf-vm", "lr0.08-tvconst-ramp0.2667-tv4"): "lr0.08-tvconst-tv4",  # session 19's rule, its curve run
+    ("fourierf-vm", "lr0.08-tvconst-ramp0.2667-tv4"): "lr0.08-tvconst-tv4",  # the band open by step 800 of 3000
 }
 """(method, the rule's 3000-iteration setting) -> the rule's 800-iteration setting, where the two are named apart."""
 
@@ -1279,10 +846,10 @@ def later_seeds_table(results: dict[str, dict], repeats: Sequence[dict]) -> list
         return []
     seeds = " | ".join(f"seed {seed}: val / test" for seed in later)
     return [
-        f"Settings run on seeds {', '.join(map(str, later))} on a GPU (an H100; runs of one session at once), beside "
+        f"Settings run on seeds {', '.join(map(str, later))} on a GPU (an H100, several runs at once), beside "
         "their earlier repeats: `-plain` is TensoRF's ReLU for the density, `-revive1` revives every dark batch (the "
         "budget rule's for a forward-facing run over 800 iterations), no suffix the field's default, which revives "
-        "a field only when it is dead (`dead_start.py`). GPU training is not bit-reproducible "
+        "a field only when it is dead. GPU training is not bit-reproducible "
         "(grid_sample's CUDA backward accumulates with atomics), so a repeat of one setting and seed is the spread "
         "a difference must clear.",
         "",
@@ -1295,7 +862,7 @@ def later_seeds_table(results: dict[str, dict], repeats: Sequence[dict]) -> list
 
 def threads_cell(rows: Iterable[dict]) -> str:
     """The CPU threads the rows trained on, as one cell: ``1`` where every CPU row says one (bit-reproducible), ``?``
-    for rows from before rows recorded it (session 48), ``—`` where none ran on a CPU."""
+    for rows that do not record it, ``—`` where none ran on a CPU."""
     cpu = [r for r in rows if r.get("device") == "cpu"]
     if not cpu:
         return "—"
@@ -1340,11 +907,11 @@ def comparable_seconds(rows: dict[str, list[dict]]) -> str:
 
 
 def recording_machines(rows: Iterable[dict]) -> str:
-    """Where the rows ran: they span many sessions' machines, so the machine that writes the report says nothing of
-    them. Rows record their CPU since session 41; older ones do not."""
+    """Where the rows ran: they span many machines, so the machine that writes the report says nothing of them.
+    Rows that record their CPU are named; the others are not."""
     named = sorted({r["machine"] for r in rows if "machine" in r})
     since = f"; rows that record theirs: {'; '.join(named)}" if named else ""
-    return f"each session's own (2-core CPUs, torch 2.13.0+cpu; an H100 where the device is cuda){since}"
+    return f"several machines (2-core CPUs, torch 2.13.0+cpu; an H100 where the device is cuda){since}"
 
 
 def report(args: argparse.Namespace) -> list[str]:

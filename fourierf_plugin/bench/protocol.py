@@ -82,8 +82,7 @@ def train_and_eval(
 
 def threads_used(train_log: Path) -> int | None:
     """The CPU thread count the trainer reported in its log (None: not found). One thread is reproducible, more are
-    not: parallel kernels sum floats in a varying order, which training amplifies (fern P-CPU, tensorf-vm with
-    Floaters-No-More, seed 20211202: val 20.14 on one thread, 20.46 on two), so a rerun must know it."""
+    not: parallel kernels sum floats in a varying order, which training amplifies, so a rerun must know it."""
     try:
         found = CPU_THREADS_NOTE.search(train_log.read_text(errors="replace"))
     except OSError:
@@ -215,7 +214,7 @@ def update_benchmarks_md(path: Path, begin: str, end: str, body: list[str]) -> s
 
 def section_head(title: str, command: str, settings: str | None = None, machine: str | None = None) -> list[str]:
     """The opening lines every BENCHMARKS.md section shares: title, machine and command, what was run. ``machine``
-    replaces this machine's description where the rows were recorded elsewhere (over many sessions)."""
+    replaces this machine's description where the rows were recorded elsewhere (on several machines)."""
     return [
         f"## {title}",
         "",

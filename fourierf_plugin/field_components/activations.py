@@ -3,15 +3,14 @@
 Why: early in a FourieRF run the band holds little more than the density's mean, so the whole field is nearly one
 number. Under TensoRF's ReLU (the real-scene preset) one Adam step can take that number below zero everywhere; then
 no sample passes a gradient, Adam's momentum carries the factors further down, and the field renders nothing until
-the band opens far enough to vary it (docs/few-shot-quality.md, "A ReLU density that cannot stay dead").
+the band opens far enough to vary it (docs/defaults.md#a-relu-density-that-cannot-stay-dead).
 ``RevivingReLU`` is the ReLU forward and backward except on a training batch with no positive density in a field
 that is dead: one that had lit an earlier batch, or that has been dark for ``patience`` batches since its start.
 There the gradient passes as if through the identity, which tells the factors which way the loss wants the density
 to go. The two cases differ because a freshly initialised field is often dark for a few batches and comes back by
-itself (fern: up to 7), while a field that went dark after rendering something stayed dark until the band opened in
-every seed counted, and the sooner it is revived the better it ends (measured: ``benchmarks/dead_start.py``). A
-constant leak would not do: Adam normalises away its scale, so the leaked gradient of the empty space pulls on every
-factor of a live field as hard as the real one (tried: fern val −2.9 dB).
+itself, while a field that went dark after rendering something stays dark until the band opens, and the sooner it is
+revived the better it ends. A constant leak would not do: Adam normalises away its scale, so the leaked gradient of
+the empty space pulls on every factor of a live field as hard as the real one.
 """
 
 from __future__ import annotations

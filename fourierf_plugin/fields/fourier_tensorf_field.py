@@ -58,8 +58,8 @@ class FieldConfig:
     been dark for ``revive_patience`` batches since its start), pass the gradient through the ReLU as if it were the
     identity; otherwise TensoRF's ReLU exactly. False = TensoRF's plain ReLU throughout."""
     revive_patience: int = 16
-    """Dark training batches in a row, from the start, before a field that never lit is revived. A fresh fern field
-    is often dark for a few batches and comes back by itself (up to 7 counted; benchmarks/dead_start.py)."""
+    """Dark training batches in a row, from the start, before a field that never lit is revived: a fresh field is
+    often dark for a few batches and comes back by itself."""
     n_voxels_init: int = 128**3
     """Voxel budget at the start (per-axis resolution follows the box's aspect ratio)."""
     n_voxels_final: int = 300**3

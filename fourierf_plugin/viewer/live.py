@@ -37,8 +37,8 @@ if TYPE_CHECKING:
     from fourierf_plugin.pipelines.base import Pipeline
 
 LIVE_SETTINGS = ViewerSettings(preview_side=128, final_side=384, preview_seconds=0.1, final_quality=PreviewQuality())
-"""Smaller and quicker pictures than for a saved run, the final one marched as a preview is (half the time, ~50 dB
-from the full render on P-CPU lego): every render second is taken from training."""
+"""Smaller and quicker pictures than for a saved run, the final one marched as a preview is (about half the time,
+close to the full render): every render second is taken from training."""
 
 
 def snapshot(model: FourieRFModel) -> dict[str, Tensor]:

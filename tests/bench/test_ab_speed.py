@@ -41,7 +41,9 @@ def test_the_summary_gives_medians_their_ratio_and_every_run(ab_speed: ModuleTyp
     in_process = next(line for line in lines if "in-process" in line)
     assert in_process.endswith("| 0.2000 | 0.1000 | 0.50 |")
     assert "- test PSNR new: 21.50 (seed 1), 21.25 (seed 2)" in lines
-    assert lines[0] == "old = `abc`, new = `working tree`: a test"
+    assert lines[0] == "a test"  # what differs, not which commits: the revisions stay in meta.json
+    flagged = ab_speed.summary(_rows(), {"old": [0.1], "new": [0.1]}, META | {"new_flags": ["--x", "1"]})
+    assert flagged[0] == "a test (extra flags, new: `--x 1`)"
 
 
 def test_the_report_rewrites_its_section_from_the_record(ab_speed: ModuleType, tmp_path: Path) -> None:
@@ -66,8 +68,8 @@ def test_a_report_without_a_recorded_ab_is_one_clear_error(tmp_path: Path) -> No
     assert not (tmp_path / "B.md").exists()
 
 
-def test_each_side_is_named_by_its_commit(ab_speed: ModuleType) -> None:
-    """A side named "HEAD" or "working tree" in BENCHMARKS.md would name another version after the next commit."""
+def test_meta_names_each_side_by_its_commit(ab_speed: ModuleType) -> None:
+    """A side named "HEAD" or "working tree" in meta.json would name another version after the next commit."""
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=SCRIPT.parents[1], check=True,
                           capture_output=True, text=True).stdout.strip()  # fmt: skip
     assert ab_speed.revision_label("HEAD") == f"HEAD ({head})"

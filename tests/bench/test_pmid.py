@@ -29,6 +29,24 @@ def _row(setting: str, seed: int, val: float, test: float) -> dict:
     }  # fmt: skip
 
 
+def test_a_settings_name_is_its_flags(pmid: ModuleType) -> None:
+    flags = pmid.setting_flags("wd0-nodecay-lr0.04-tv4-comp8-f0d0.1")
+    assert flags == [
+        "--optimizer.weight-decay", "0", "--optimizer.lr-decay-ratio", "1.0", "--optimizer.lr-grids", "0.04",
+        "--pipeline.model.tv-weight-density", "4", "--pipeline.model.tv-weight-appearance", "4",
+        "--pipeline.model.field.density-components", "8", "8", "8",
+        "--pipeline.model.field.appearance-components", "24", "24", "24",
+        "--pipeline.model.fourier.f0-density", "0.1",
+    ]  # fmt: skip
+    assert pmid.setting_flags("preset") == []
+    for scene, names in pmid.SETTINGS.items():
+        assert len(set(names)) == len(names), f"{scene}: a setting listed twice"
+        for name in names:
+            pmid.setting_flags(name)  # every listed setting parses
+    with pytest.raises(ValueError, match="no such token 'tvx'"):
+        pmid.setting_flags("lr0.08-tvx")
+
+
 def test_the_choice_reads_validation_only(pmid: ModuleType) -> None:
     first = pmid.SEEDS[0]
     rows = [
@@ -290,7 +308,7 @@ def test_the_machine_line_names_the_rows_machines_not_the_reporters(pmid: Module
     rows = [_row("wd0", 1, 22.0, 22.0), _row("wd0", 2, 22.0, 22.0) | {"machine": "CPU A, 2 cores"}]
     rows.append(_row("wd0", 3, 22.0, 22.0) | {"machine": "CPU A, 2 cores"})
     line = pmid.recording_machines(rows)
-    assert line.count("CPU A, 2 cores") == 1 and "each session's own" in line
+    assert line.count("CPU A, 2 cores") == 1 and "2-core CPUs" in line
     assert "record theirs" not in pmid.recording_machines(rows[:1])
 
 

@@ -48,7 +48,7 @@ def test_threads_reach_the_training_and_every_evaluation(commands: list[list[str
     row |= protocol.evaluate(Path(row["run_dir"]), run.key, tmp_path, tmp_path / "w.pth", split="val", threads=1)
     assert [_threads(c) for c in commands] == ["1", "1", "1"]
     assert (row["psnr"], row["val_psnr"], row["val_view_ids"]) == (20.0, 20.0, [2, 3])
-    assert row["machine"] == protocol.cpu_and_cores()  # rows span sessions: each says where it ran
+    assert row["machine"] == protocol.cpu_and_cores()  # rows span machines: each says where it ran
     assert row["train_threads"] == 1  # a rerun must use as many: the thread count sets the order of float sums
 
 

@@ -29,6 +29,7 @@ LAYERS: dict[str, int] = {
     f"{PACKAGE}.model_components": 1,
     f"{PACKAGE}.data.scene_effects": 1,
     f"{PACKAGE}.data.dataparser_base": 2,
+    f"{PACKAGE}.data.dataparser_transforms": 1,
     f"{PACKAGE}.data.images": 1,
     f"{PACKAGE}.data.poses": 1,
     f"{PACKAGE}.data.capture": 1,

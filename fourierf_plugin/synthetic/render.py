@@ -1,7 +1,7 @@
 """Exact ray casting of a scene: nearest hits, their colour, and one camera's straight-alpha RGBA image.
 
-The renderer simulates only what a ground-truth scene needs: coverage (alpha) and the diffuse albedo; Lambert
-shading from one directional light is added only when asked.
+The renderer simulates only what a ground-truth scene needs: coverage (alpha) and the diffuse albedo (a primitive's
+flat colour, or its texture at the hit point); Lambert shading from one directional light is added only when asked.
 """
 
 from __future__ import annotations
@@ -21,11 +21,13 @@ _CHUNK_RAYS = 1 << 18  # rays intersected at once: bounds memory at large sizes 
 
 @dataclass(frozen=True)
 class RayHits:
-    """Nearest hits of a batch of rays: ``t`` ([N], inf on a miss), ``index`` ([N], -1 on a miss), ``normal``."""
+    """Nearest hits of a batch of rays: ``t`` ([N], inf on a miss), ``index`` ([N], -1 on a miss), ``normal``, and
+    the hit ``point`` ([N, 3], NaN on a miss)."""
 
     t: np.ndarray
     index: np.ndarray
     normal: np.ndarray
+    point: np.ndarray
 
     @property
     def hit(self) -> np.ndarray:
@@ -44,13 +46,20 @@ def intersect_scene(spec: SceneSpec, origins: np.ndarray, directions: np.ndarray
         t, nrm = prim.intersect(origins, directions)
         closer = t < best_t
         best_t[closer], index[closer], normal[closer] = t[closer], i, nrm[closer]
-    return RayHits(best_t, index, normal)
+    point = np.full((n, 3), np.nan)
+    hit = index >= 0
+    point[hit] = origins[hit] + best_t[hit, None] * directions[hit]
+    return RayHits(best_t, index, normal, point)
 
 
 def shade(spec: SceneSpec, hits: RayHits, directions: np.ndarray, shading: Shading = "none") -> np.ndarray:
     """Colour [N, 3] of each ray (0 on a miss): the albedo, times the Lambert term when ``shading="lambert"``."""
     albedo = np.array([p.color for p in spec.primitives] + [(0.0, 0.0, 0.0)])
     rgb = albedo[hits.index]  # index -1 picks the trailing black row
+    for i, prim in enumerate(spec.primitives):
+        mine = hits.index == i
+        if getattr(prim, "texture", None) is not None and mine.any():
+            rgb[mine] = prim.color_at(hits.point[mine], hits.normal[mine])
     if shading == "none":
         return rgb
     if shading != "lambert":

@@ -9,12 +9,13 @@ from typing import Any
 
 import numpy as np
 
-from fourierf_plugin.synthetic.primitives import Box, GroundPlane, Primitive, Sphere, Vec3, _vec3
+from fourierf_plugin.synthetic.primitives import Box, GroundPlane, Panel, Primitive, Sphere, Vec3, _vec3
+from fourierf_plugin.synthetic.textures import Texture
 from fourierf_plugin.utils.errors import fail
 
 SCENE_FORMAT = "fourierf-synthetic-scene"
 SCENE_VERSION = 1
-_TYPES: dict[str, type] = {"sphere": Sphere, "box": Box, "ground_plane": GroundPlane}
+_TYPES: dict[str, type] = {"sphere": Sphere, "box": Box, "ground_plane": GroundPlane, "panel": Panel}
 _TYPE_NAMES = {cls: name for name, cls in _TYPES.items()}
 
 
@@ -33,7 +34,7 @@ class SceneSpec:
         if not prims:
             raise ValueError("a scene needs at least one primitive")
         for p in prims:
-            if not isinstance(p, (Sphere, Box, GroundPlane)):
+            if not isinstance(p, (Sphere, Box, GroundPlane, Panel)):
                 raise ValueError(f"unknown primitive {p!r}")
         light = _vec3(self.light_direction, "light_direction")
         if np.linalg.norm(light) == 0:
@@ -55,7 +56,10 @@ class SceneSpec:
             item: dict[str, Any] = {"type": _TYPE_NAMES[type(p)]}
             for f in fields(p):
                 value = getattr(p, f.name)
-                item[f.name] = list(value) if isinstance(value, tuple) else value
+                if isinstance(value, Texture):
+                    item[f.name] = value.to_dict()
+                elif f.name != "texture":  # no texture: no key, so a flat-coloured primitive's JSON stays minimal
+                    item[f.name] = list(value) if isinstance(value, tuple) else value
             prims.append(item)
         return {
             "format": SCENE_FORMAT,

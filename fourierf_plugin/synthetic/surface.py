@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
+from fourierf_plugin.synthetic.primitives import Primitive
 from fourierf_plugin.synthetic.scene import SceneSpec
 
 
-def sample_surface(spec: SceneSpec, n: int, seed: int = 0) -> np.ndarray:
+def sample_surface(spec: SceneSpec, n: int, seed: int = 0, occluders: Sequence[Primitive] = ()) -> np.ndarray:
     """[n, 3] points uniform (by area) on the scene's exposed surface: the union of the primitives' surfaces
     without the parts buried inside another solid. This is the reference surface of Chamfer distances.
+
+    ``occluders`` are solids that bury surface without adding any of their own (the table under an object: the
+    object's faces resting in it are not part of the object's exposed surface).
 
     Area-weighted sampling with rejection keeps the result uniform over what remains. Surfaces that no camera
     sees (undersides, the faces of a box resting on the ground) are kept: they are exposed, just unobserved.
@@ -33,6 +39,8 @@ def sample_surface(spec: SceneSpec, n: int, seed: int = 0) -> np.ndarray:
             points[mine] = prim.sample(int(mine.sum()), rng)
         for j, other in enumerate(prims):
             visible &= ~((which != j) & other.contains(points))
+        for solid in occluders:
+            visible &= ~solid.contains(points)
         kept.append(points[visible])
         total += int(visible.sum())
     if total < n:

@@ -17,6 +17,7 @@ from fourierf_plugin.data.dataparser_base import (
     DataparserOutputs,
     Split,
 )
+from fourierf_plugin.data.dataparser_transforms import DataparserTransform
 from fourierf_plugin.data.images import load_images
 from fourierf_plugin.data.poses import rotation_problem
 from fourierf_plugin.data.scene_effects import SceneDeclaration
@@ -176,6 +177,7 @@ class BlenderDataParser(DataParser):
             far=cfg.far,
             scene_name=data.resolve().name,
             source_files=paths,
+            dataparser_transform=DataparserTransform.identity(),  # the poses are used as the files give them
         )
 
 

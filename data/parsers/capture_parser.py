@@ -21,6 +21,7 @@ from fourierf_plugin.cameras.cameras import Cameras
 from fourierf_plugin.cameras.distortion import has_distortion, undistorted_directions
 from fourierf_plugin.data.capture import Capture
 from fourierf_plugin.data.dataparser_base import DataParser, DataParserConfig, DataparserOutputs, Split
+from fourierf_plugin.data.dataparser_transforms import DataparserTransform, fit_transform
 from fourierf_plugin.data.parsers.capture_images import (
     auto_downscale,
     has_alpha,
@@ -32,9 +33,12 @@ from fourierf_plugin.data.parsers.capture_images import (
 from fourierf_plugin.data.parsers.capture_scene import (
     KindDecision,
     NormalisedScene,
+    camera_to_worlds,
     decide_scene_kind,
     normalise_forward_facing,
     normalise_object,
+    normalise_unbounded,
+    share_beyond_cameras,
 )
 from fourierf_plugin.data.parsers.llff import LLFF_DECLARATION
 from fourierf_plugin.data.poses import Orientation
@@ -52,6 +56,19 @@ def object_declaration(background_known: bool, reason: str) -> SceneDeclaration:
     return SceneDeclaration(
         background="white" if background_known else "none",
         ray_space="euclidean",
+        view_dependent=False,
+        occlusion_regularization=False,
+        bounded=True,
+        reason=reason,
+    )
+
+
+def unbounded_declaration(reason: str) -> SceneDeclaration:
+    """An object photographed with its surroundings: contracted rays (the object's region kept, the rest of the
+    world squeezed into a shell around it), photos' own background learnt as scene, no view dependence."""
+    return SceneDeclaration(
+        background="none",
+        ray_space="contracted",
         view_dependent=False,
         occlusion_regularization=False,
         bounded=True,
@@ -116,12 +133,24 @@ class CaptureParser(DataParser):
         if cfg.scene_kind != "auto":
             return KindDecision(cfg.scene_kind, cfg.scene_kind_reason or "set by --scene-kind")
         decision = decide_scene_kind(self.capture())
+        if decision.kind == "object" and not self._background_known():
+            decision = KindDecision("unbounded", self._unbounded_reason(decision.reason))
         return KindDecision(decision.kind, f"auto: {decision.reason}")
+
+    def _unbounded_reason(self, cameras: str) -> str:
+        share = share_beyond_cameras(self.capture(), self.config.orientation)
+        points = "" if share is None else f"; {share:.0%} of the sparse points lie beyond the cameras"
+        return (
+            f"{cameras}, and the photos carry no alpha or masks{points}: the object is modelled with its "
+            "surroundings (space beyond the cameras contracted)"
+        )
 
     def declaration(self) -> SceneDeclaration:
         decision = self.scene_kind()
         if decision.kind == "forward-facing":
             return dataclasses.replace(LLFF_DECLARATION, reason=decision.reason)
+        if decision.kind == "unbounded":
+            return unbounded_declaration(decision.reason)
         return object_declaration(self._background_known(), decision.reason)
 
     def _background_known(self) -> bool:
@@ -135,8 +164,11 @@ class CaptureParser(DataParser):
     def normalised(self) -> NormalisedScene:
         if self._scene is None:
             cfg, capture = self.config, self.capture()
-            if self.scene_kind().kind == "forward-facing":
+            kind = self.scene_kind().kind
+            if kind == "forward-facing":
                 self._scene = normalise_forward_facing(capture, cfg.bd_factor)
+            elif kind == "unbounded":
+                self._scene = normalise_unbounded(capture, cfg.orientation)
             else:
                 self._scene = normalise_object(capture, cfg.orientation, cfg.scene_scale)
         return self._scene
@@ -278,7 +310,13 @@ class CaptureParser(DataParser):
             scene_name=self.scene_name(),
             source_files=[f.image_path for f in frames],
             depth_bounds=scene.depth_bounds,
+            dataparser_transform=self.dataparser_transform(),
         )
+
+    def dataparser_transform(self) -> DataparserTransform | None:
+        """The map from the capture's world frame to the normalised one, recovered from the poses before and after
+        (``fit_transform``); None when they do not pin it down (every camera in one place)."""
+        return fit_transform(camera_to_worlds(self.capture()), self.normalised().camera_to_worlds)
 
     def scene_name(self) -> str:
         data = Path(self.config.data)
@@ -306,9 +344,11 @@ class CaptureParserConfig(DataParserConfig):
     """Object scenes: up (the cameras' mean up becomes +z), pca (least camera spread becomes z) or none."""
     scene_scale: float = 1.0
     """Object scenes: scale the scene box (from the sparse points, else the cameras) about its centre."""
-    scene_kind: Literal["auto", "object", "forward-facing"] = "auto"
+    scene_kind: Literal["auto", "object", "forward-facing", "unbounded"] = "auto"
     """auto: forward-facing (NDC rays, the real-scene preset) when every camera looks the same way and they do not
-    surround the scene, else object (a bounded box); the run's config.json records the decision."""
+    surround the scene; else object (a bounded box on a known background) when the photos carry alpha or masks, and
+    unbounded (the object with its surroundings, space beyond the cameras contracted) when they do not. The run's
+    config.json records the decision."""
     scene_kind_reason: tyro.conf.Suppress[str] = ""
     """Why scene_kind has its value, recorded when a run pins the automatic decision (not a flag)."""
     bd_factor: float = 0.75
@@ -317,5 +357,5 @@ class CaptureParserConfig(DataParserConfig):
     def pin(self, declared: SceneDeclaration) -> None:
         """Record what ``auto`` decided (and why) in the config, so a saved run never decides again."""
         if self.scene_kind == "auto":
-            self.scene_kind = "object" if declared.bounded else "forward-facing"
+            self.scene_kind = declared.kind  # type: ignore[assignment]
             self.scene_kind_reason = declared.reason

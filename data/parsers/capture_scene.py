@@ -19,7 +19,7 @@ from fourierf_plugin.data.parsers.llff import NDC_BOX
 from fourierf_plugin.data.poses import Orientation, focus_point, orientation_rotation, recenter_poses
 from fourierf_plugin.utils.errors import fail
 
-SceneKind = Literal["object", "forward-facing"]
+SceneKind = Literal["object", "forward-facing", "unbounded"]
 
 VIEW_CONE_DEG = 50.0
 """A forward-facing capture: every camera looks within this angle of the cameras' mean viewing direction."""
@@ -36,6 +36,10 @@ MIN_BOX_POINTS = 10
 """Fewer sparse points than this say nothing about where the object is: the box then comes from the cameras."""
 OBJECT_NEAR = 0.05
 """Near plane of an object scene, in its units (the cameras fit the unit box): rays never sample at the lens."""
+UNBOUNDED_FAR = 1000.0
+"""Far plane of an unbounded scene, in its units: the contraction maps it next to the grid's outer face."""
+CONTRACTED_BOX = ((-2.0, -2.0, -2.0), (2.0, 2.0, 2.0))
+"""The grid of an unbounded scene covers the contracted space."""
 
 
 @dataclass(frozen=True)
@@ -207,11 +211,9 @@ def _box_from_views(c2w: np.ndarray, capture: Capture) -> np.ndarray:
     return np.array([[-half] * 3, [half] * 3])
 
 
-def normalise_object(capture: Capture, orientation: Orientation, scene_scale: float) -> NormalisedScene:
-    """nerfstudio-like: turned upright (``orientation``), centred on the cameras' focus (their mean centre when the
-    axes do not converge), scaled so the cameras fit [-1, 1]^3. The box holds the sparse points (robust percentiles,
-    padded); without points, what the converging cameras see whole, else the cameras' cube; ``scene_scale`` then
-    grows or shrinks it about its centre."""
+def _upright_centred(capture: Capture, orientation: Orientation) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Poses turned upright, centred on the cameras' focus (their mean centre when the axes do not converge) and
+    scaled so the cameras fit [-1, 1]³; the sparse points in the same frame; whether the axes converge."""
     c2w = camera_to_worlds(capture)
     rotation = orientation_rotation(c2w, orientation)
     c2w = np.concatenate([rotation @ c2w[:, :, :3], (c2w[:, :, 3] @ rotation.T)[:, :, None]], axis=2)
@@ -222,10 +224,18 @@ def normalise_object(capture: Capture, orientation: Orientation, scene_scale: fl
     extent = float(np.abs(c2w[:, :, 3]).max())
     scale = 1.0 / extent if extent > 1e-12 else 1.0
     c2w[:, :, 3] *= scale
-    points = (points - centre) * scale
+    return c2w, (points - centre) * scale, focus is not None
+
+
+def normalise_object(capture: Capture, orientation: Orientation, scene_scale: float) -> NormalisedScene:
+    """nerfstudio-like: turned upright (``orientation``), centred on the cameras' focus (their mean centre when the
+    axes do not converge), scaled so the cameras fit [-1, 1]^3. The box holds the sparse points (robust percentiles,
+    padded); without points, what the converging cameras see whole, else the cameras' cube; ``scene_scale`` then
+    grows or shrinks it about its centre."""
+    c2w, points, converge = _upright_centred(capture, orientation)
     if len(points) >= MIN_BOX_POINTS:
         box = _box_from_points(points)
-    elif focus is not None:
+    elif converge:
         box = _box_from_views(c2w, capture)
     else:
         box = np.array([[-1.0] * 3, [1.0] * 3])
@@ -234,3 +244,19 @@ def normalise_object(capture: Capture, orientation: Orientation, scene_scale: fl
     corners = np.stack(np.meshgrid(*box.T, indexing="ij"), axis=-1).reshape(-1, 3)
     far = float(np.linalg.norm(corners[None] - c2w[:, None, :, 3], axis=-1).max())
     return NormalisedScene(c2w, box, OBJECT_NEAR, max(far, 2 * OBJECT_NEAR), None)
+
+
+def normalise_unbounded(capture: Capture, orientation: Orientation) -> NormalisedScene:
+    """An object with its surroundings: posed as an object capture (the cameras fit the inner cube [-1, 1]³ about
+    their focus), everything beyond the inner cube contracted (mip-NeRF 360); the grid covers the contracted box."""
+    c2w, _, _ = _upright_centred(capture, orientation)
+    return NormalisedScene(c2w, np.asarray(CONTRACTED_BOX, dtype=np.float64), OBJECT_NEAR, UNBOUNDED_FAR, None)
+
+
+def share_beyond_cameras(capture: Capture, orientation: Orientation) -> float | None:
+    """The share of sparse points outside the cube the cameras span about their focus (None without points): photos
+    of an object in a room see walls and furniture there."""
+    _, points, _ = _upright_centred(capture, orientation)
+    if len(points) < MIN_BOX_POINTS:
+        return None
+    return float((np.abs(points).max(axis=1) > 1.0).mean())

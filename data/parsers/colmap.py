@@ -13,6 +13,7 @@ from typing import ClassVar
 
 from fourierf_plugin.data.capture import Capture
 from fourierf_plugin.data.colmap_model import capture_from_model, read_model
+from fourierf_plugin.data.dataparser_transforms import DataparserTransform
 from fourierf_plugin.data.parsers.capture_parser import CaptureParser, CaptureParserConfig
 from fourierf_plugin.utils.errors import fail
 
@@ -55,6 +56,13 @@ class ColmapDataParser(CaptureParser):
         return capture_from_model(
             read_model(folder), images if images.is_absolute() else Path(self.config.data) / images
         )
+
+    def dataparser_transform(self) -> DataparserTransform | None:
+        """From the COLMAP model's own world frame, so a mesh overlays its points (the poses are read into
+        nerfstudio's turned frame first, ``applied_transform``)."""
+        inner = super().dataparser_transform()
+        applied = self.capture().applied_transform
+        return inner if inner is None or applied is None else inner.after(applied)
 
 
 @dataclass

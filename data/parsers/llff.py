@@ -22,6 +22,7 @@ from fourierf_plugin.data.dataparser_base import (
     DataparserOutputs,
     Split,
 )
+from fourierf_plugin.data.dataparser_transforms import fit_transform
 from fourierf_plugin.data.images import load_images
 from fourierf_plugin.data.poses import recenter_poses, rotation_problem
 from fourierf_plugin.data.scene_effects import SceneDeclaration
@@ -171,7 +172,8 @@ class LLFFDataParser(DataParser):
                 "the poses and images must match one to one: re-run pose estimation or restore the missing images",
             )
         scale = 1.0 / (bounds.min() * cfg.bd_factor)
-        c2w = to_opengl(raw)
+        original = to_opengl(raw)
+        c2w = original.copy()
         c2w[:, :, 3] *= scale
         c2w = recenter_poses(c2w)
         bounds = bounds * scale
@@ -201,6 +203,7 @@ class LLFFDataParser(DataParser):
             scene_name=data.resolve().name,
             source_files=[files[i] for i in ids],
             depth_bounds=(float(bounds.min()), float(bounds.max())),
+            dataparser_transform=fit_transform(original, c2w),
         )
 
 

@@ -10,6 +10,7 @@ from torch import Tensor
 
 from fourierf_plugin.cameras.cameras import Cameras
 from fourierf_plugin.configs.base import InstantiateConfig
+from fourierf_plugin.data.dataparser_transforms import DataparserTransform
 from fourierf_plugin.data.scene_effects import SceneDeclaration
 
 Split = Literal["train", "val", "test"]
@@ -33,6 +34,8 @@ class DataparserOutputs:
     scene_name: str
     source_files: list[Path] = field(default_factory=list)
     depth_bounds: tuple[float, float] | None = None  # metric (near, far) of the content, e.g. for spiral paths in NDC
+    dataparser_transform: DataparserTransform | None = None
+    """The map from the capture's world frame to the poses above (None: not known, meshes stay normalised)."""
 
 
 @dataclass

@@ -15,7 +15,9 @@ from typing import Literal
 
 # "none": photos with no background; every ray must be absorbed (trained on black or white at random, shown on black).
 Background = Literal["white", "black", "random", "none"]
-RaySpace = Literal["euclidean", "ndc"]
+RaySpace = Literal["euclidean", "ndc", "contracted"]
+"""euclidean: rays through a bounded box; ndc: forward-facing rays in normalised device coordinates; contracted: an
+unbounded scene, the inner cube [-1, 1]³ kept and the space beyond it squeezed into [-2, 2]³ (mip-NeRF 360)."""
 
 
 def _yes(flag: bool) -> str:
@@ -52,8 +54,19 @@ class SceneDeclaration(SceneEffects):
     reason: str = ""
     """Why the parser declared this (e.g. how it told a forward-facing capture from an object); empty when fixed."""
 
+    @property
+    def kind(self) -> str:
+        """object (a bounded box), unbounded (an object with its surroundings, contracted) or forward-facing."""
+        if self.ray_space == "contracted":
+            return "unbounded"
+        return "object" if self.bounded else "forward-facing"
+
+    @property
+    def kind_label(self) -> str:
+        return {"object": "object (bounded)", "unbounded": "unbounded (contracted)"}.get(self.kind, self.kind)
+
     def describe(self) -> str:
-        return f"{super().describe()}, {'bounded' if self.bounded else 'forward-facing'}"
+        return f"{super().describe()}, {'bounded' if self.kind == 'object' else self.kind}"
 
 
 @dataclass
@@ -63,7 +76,7 @@ class EffectsConfig:
     background: Background | None = None
     """Background (Blender scenes declare white, LLFF none = photos: trained on black or white at random)."""
     ray_space: RaySpace | None = None
-    """Ray space (LLFF scenes declare NDC)."""
+    """Ray space (LLFF scenes declare NDC, photo captures around an object without alpha declare contracted)."""
     view_dependent: bool | None = None
     """Whether colour depends on the view direction (few-shot scenes declare no)."""
     occlusion_regularization: bool | None = None

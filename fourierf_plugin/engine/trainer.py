@@ -20,8 +20,10 @@ from rich.markup import escape
 from fourierf_plugin import __version__
 from fourierf_plugin.accel.config import uses_gpu_paths
 from fourierf_plugin.configs.base import InstantiateConfig, save_config
+from fourierf_plugin.data.dataparser_transforms import write_run_frame
 from fourierf_plugin.engine.checkpoint import load_latest_checkpoint, save_checkpoint
 from fourierf_plugin.engine.estimates import describe_cost
+from fourierf_plugin.engine.health import DEAD_FIELD_FIX, dead_field_problem, flat_colour_psnr
 from fourierf_plugin.engine.machine import pick_device, seed_everything
 from fourierf_plugin.engine.observers import (
     StepReport,
@@ -173,6 +175,7 @@ class Trainer:
         self.checkpoint_dir.mkdir(exist_ok=True)
         save_config(c, self.run_dir / "config.json")
         self._write_views()
+        write_run_frame(self.run_dir, self.pipeline.datamanager.reference_outputs, self.pipeline.effects.ray_space)
         self._announce()
 
     # -- set-up ---------------------------------------------------------------------------------------------------
@@ -234,6 +237,16 @@ class Trainer:
         self.console.print(f"mesh at step {step}: " + "; ".join(describe(report)))
 
     # -- loop -------------------------------------------------------------------------------------------------------
+    def _check_alive(self, done: int, shown: dict[str, float]) -> None:
+        """A run whose field stayed empty, or renders worse than one flat colour, ends with a clear error."""
+        images = self.pipeline.datamanager.reference_outputs.images
+        problem = dead_field_problem(
+            done, self.pipeline.model.empty_at_last_update, shown.get("psnr"), flat_colour_psnr(images)
+        )
+        if problem is not None:
+            append_jsonl(self.run_dir / "metrics.jsonl", {"event": "dead_field", "step": done, "problem": problem})
+            fail(f"{problem} after {done} iterations (run in {self.run_dir})", DEAD_FIELD_FIX)
+
     def train(self) -> Path:
         c = self.config
         model = self.pipeline.model
@@ -302,6 +315,7 @@ class Trainer:
             phase_totals.update(timer.take())
             done_record["phases_total"] = dict(phase_totals)
         append_jsonl(metrics_path, done_record)
+        self._check_alive(done, shown)
         self.console.print(
             f"trained {done - self.start_step} iterations in {format_duration(elapsed)}; run in {self.run_dir}"
         )
@@ -368,4 +382,4 @@ class TrainerConfig(InstantiateConfig):
     """Synthetic or real-scene settings; auto picks real for forward-facing scenes (flags you set always win)."""
     budget_rule: bool = True
     """Runs shorter than the paper's 10k iterations get the values chosen on validation views for short runs
-    (README, Presets); False keeps the preset's values at any budget."""
+    (docs/defaults.md, one section per rule); False keeps the preset's values at any budget."""

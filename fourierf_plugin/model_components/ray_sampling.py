@@ -1,5 +1,5 @@
-"""Ray–box intersection and the two samplers (fixed steps through the box, even steps along NDC rays), as pure
-functions."""
+"""Ray–box intersection and the three samplers (fixed steps through the box, even steps along NDC rays, fixed steps
+of the contracted coordinate for unbounded scenes), and the scene contraction, as pure functions."""
 
 from __future__ import annotations
 
@@ -113,3 +113,84 @@ def ndc_samples(
     inside = ((points >= aabb[0]) & (points <= aabb[1])).all(dim=-1)
     deltas = sample_deltas(t) * directions.norm(dim=-1, keepdim=True)
     return RaySamples(t, deltas, points, inside, directions / directions.norm(dim=-1, keepdim=True))
+
+
+def contract(points: Tensor) -> Tensor:
+    """Scene contraction (mip-NeRF 360, with the L∞ norm as grids use it): the inner cube [-1, 1]³ is kept as it
+    is, everything beyond it is squeezed into the shell out to [-2, 2]³, so a grid covers an unbounded scene."""
+    norm = points.abs().amax(dim=-1, keepdim=True)
+    outside = norm > 1.0
+    safe = torch.where(outside, norm, torch.ones_like(norm))
+    return torch.where(outside, (2.0 - 1.0 / safe) * (points / safe), points)
+
+
+def uncontract(points: Tensor) -> Tensor:
+    """The inverse of :func:`contract` on (-2, 2)³."""
+    norm = points.abs().amax(dim=-1, keepdim=True)
+    outside = norm > 1.0
+    safe = torch.where(outside, norm, torch.ones_like(norm))
+    return torch.where(outside, points / (safe * (2.0 - safe).clamp(min=1e-6)), points)
+
+
+ARC_TABLE_POINTS = 64
+"""Points per segment (inside the inner cube, beyond it) of the table that maps a ray's parameter to its length in
+the contracted space."""
+
+
+def _table_t(index: Tensor, t_exit: Tensor, near: float, far: float) -> Tensor:
+    """Ray parameter at a (fractional) table index: linear from ``near`` to the inner cube's exit over the first
+    ``ARC_TABLE_POINTS`` entries, linear in disparity from there to ``far`` over the next ``ARC_TABLE_POINTS``."""
+    k = float(ARC_TABLE_POINTS)
+    u = (index / k).clamp(max=1.0)
+    v = ((index - k) / k).clamp(min=0.0, max=1.0)
+    linear = near + (t_exit - near) * u
+    beyond = t_exit / (1.0 - v * (1.0 - t_exit / far))
+    return torch.where(index < k, linear, beyond)
+
+
+def _inner_exit(origins: Tensor, directions: Tensor, near: float, far: float) -> Tensor:
+    inner = torch.tensor([[-1.0] * 3, [1.0] * 3], device=origins.device, dtype=origins.dtype)
+    return ray_aabb_intersect(origins, directions, inner)[1].clamp(min=near, max=far).unsqueeze(-1)
+
+
+def contracted_arc_table(origins: Tensor, directions: Tensor, near: float, far: float) -> tuple[Tensor, Tensor]:
+    """Per ray, ray parameters [R, 2K+1] from ``near`` to ``far`` (``_table_t`` at whole indices) and the length of
+    the contracted ray up to each: the table :func:`contracted_samples` inverts."""
+    t_exit = _inner_exit(origins, directions, near, far)
+    index = torch.arange(2 * ARC_TABLE_POINTS + 1, device=origins.device, dtype=origins.dtype)
+    t = _table_t(index.expand(origins.shape[0], -1), t_exit, near, far)
+    points = contract(_points(origins, directions, t))
+    steps = (points[:, 1:] - points[:, :-1]).norm(dim=-1)
+    length = torch.cat([torch.zeros_like(t[:, :1]), steps.cumsum(dim=-1)], dim=-1)
+    return t, length
+
+
+def contracted_samples(
+    origins: Tensor,
+    directions: Tensor,
+    aabb: Tensor,
+    near: float,
+    far: float,
+    step: float,
+    max_samples: int,
+    generator: torch.Generator | None = None,
+) -> RaySamples:
+    """Unbounded scenes: each (unit-direction) ray from ``near`` to ``far`` marched in fixed steps of its length in the
+    contracted space (one random shift per ray in training), so samples are as dense in the far shell as in the inner
+    cube; the points are the contracted positions the grid (``aabb`` ⊆ [-2, 2]³) covers, the intervals metric ones."""
+    num_rays = origins.shape[0]
+    table_t, table_length = contracted_arc_table(origins, directions, near, far)
+    span = table_length[:, -1]
+    needed = math.ceil(float(span.max()) / step) + 1 if num_rays else 0
+    num_samples = max(1, min(max_samples, needed))
+    jitter = random_on(generator, (num_rays,)).to(origins.device) if generator is not None else None
+    length = step_samples(torch.zeros_like(span), step, num_samples, jitter)
+    within = length < span.unsqueeze(-1)
+    length = torch.minimum(length, span.unsqueeze(-1)).contiguous()
+    upper = torch.searchsorted(table_length, length, right=True).clamp(1, table_t.shape[1] - 1)
+    l0, l1 = table_length.gather(1, upper - 1), table_length.gather(1, upper)
+    index = (upper - 1) + (length - l0) / (l1 - l0).clamp(min=1e-12)
+    t = _table_t(index, _inner_exit(origins, directions, near, far), near, far)
+    points = contract(_points(origins, directions, t))
+    inside = within & ((points >= aabb[0]) & (points <= aabb[1])).all(dim=-1)
+    return RaySamples(t, sample_deltas(t), points, inside, directions)

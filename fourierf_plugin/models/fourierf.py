@@ -39,7 +39,13 @@ from fourierf_plugin.model_components.occupancy import (
     shrink_bounds,
     vertex_grid,
 )
-from fourierf_plugin.model_components.ray_sampling import RaySamples, box_samples, ndc_samples, ray_box_span
+from fourierf_plugin.model_components.ray_sampling import (
+    RaySamples,
+    box_samples,
+    contracted_samples,
+    ndc_samples,
+    ray_box_span,
+)
 from fourierf_plugin.model_components.rendering import (
     background_color,
     blend_background,
@@ -154,6 +160,7 @@ class FourieRFModel(nn.Module):
         if config.fourier.enabled and config.fourier.init_in_band and isinstance(self.field, FourierTensoRFField):
             self.field.keep_band(*self.cutoffs(0))
         self.occupancy = OccupancyGrid()
+        self.empty_at_last_update = False  # the latest occupancy update found no density: a dead field, late in a run
 
     def _build_field(
         self, scene_box: Tensor, effects: SceneEffects, generator: torch.Generator, device: torch.device | str
@@ -303,12 +310,16 @@ class FourieRFModel(nn.Module):
         return out
 
     def sample(self, origins: Tensor, directions: Tensor, jitter: torch.Generator | None = None) -> RaySamples:
-        """Fixed steps through the box (euclidean rays) or even steps along NDC rays; jittered in training (from
-        ``jitter``, default the step generator)."""
+        """Fixed steps through the box (euclidean rays), even steps along NDC rays, or fixed steps of the contracted
+        coordinate (unbounded scenes); jittered in training (from ``jitter``, default the step generator)."""
         generator = (jitter or self.step_generator) if self.training else None
         num = self.samples_per_ray(self.training)
         if self.effects.ray_space == "ndc":
             return ndc_samples(origins, directions, self.aabb, self.near, self.far, num, generator)
+        if self.effects.ray_space == "contracted":
+            return contracted_samples(
+                origins, directions, self.aabb, self.near, self.far, self.step_size, num, generator
+            )
         fixed = self.gpu_paths and self.training
         return box_samples(origins, directions, self.aabb, self.near, self.far, self.step_size, num, generator, fixed)
 
@@ -445,11 +456,13 @@ class FourieRFModel(nn.Module):
         vertices = occupancy_from_alpha(self._dense_alpha(reso), self.config.occupancy_threshold)
         box = occupied_aabb(vertices, self.aabb)
         if box is None:
+            self.empty_at_last_update = True
             get_console().print(
                 "[yellow]warning:[/yellow] the occupancy grid is empty (no density above the threshold); "
                 "keeping the previous box and sampling everywhere"
             )
             return
+        self.empty_at_last_update = False
         self.occupancy.set(vertices, self.aabb)
         # Said at every update because what it prunes is never sampled again: a run that stalls after an update that
         # kept little of a forward-facing scene's grid was pruned while still dark (README, budget rule).
@@ -535,8 +548,8 @@ class FourieRFModelConfig(InstantiateConfig):
     background (white) before it; None = from the step after the first occupancy update (0 without one). Why not
     from the start: a random background charges density only on rays that cross the background in some training
     view, so the fog a fresh field starts with stays wherever none does, keeps the occupancy grid's box from
-    shrinking (lego at P-MID: 2.5 x 3.0 x 2.2 against 1.5 x 2.6 x 1.8) and shows as coloured floaters at the box's
-    edges; and under it TensoRF's density L1 emptied fields that had not lit yet (lego, seed 20211202, val 9.60).
+    shrinking and shows as coloured floaters at the box's edges; and under it TensoRF's density L1 can empty a field
+    that has not lit yet.
     On white first the L1 clears the fog and the field lights; the random background then charges what white cannot,
     density outside the object's silhouette (README, "Scene effects")."""
     floaters_gradient_scaling: bool = False

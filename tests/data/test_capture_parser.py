@@ -165,10 +165,10 @@ def test_finalize_prints_and_pins_the_decision(tmp_path: Path) -> None:
     scene = write_scene(tmp_path / "ring", ring_c2w(10))
     config, notes = finalize(parse_args(["fourierf-vm", "--data", str(scene), "nerfstudio-data"]))
     parser = config.pipeline.datamanager.dataparser
-    assert isinstance(parser, NerfstudioDataParserConfig) and parser.scene_kind == "object"
+    assert isinstance(parser, NerfstudioDataParserConfig) and parser.scene_kind == "unbounded"  # photos, no alpha
     assert parser.scene_kind_reason.startswith("auto: ")
-    assert [n for n in notes if n.startswith("scene kind: object")] == [
-        f"scene kind: object (bounded) ({parser.scene_kind_reason})"
+    assert [n for n in notes if n.startswith("scene kind: ")] == [
+        f"scene kind: unbounded (contracted) ({parser.scene_kind_reason})"
     ]
     assert config.scene_preset == "synthetic"
     given, _ = finalize(parse_args(["fourierf-vm", "--data", str(scene), "nerfstudio-data", "--scene-kind", "object"]))

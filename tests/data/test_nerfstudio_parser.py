@@ -345,13 +345,13 @@ def test_cli_turns_a_bad_scene_into_exit_2(ring: Path, tmp_path: Path, capsys) -
 def test_tiny_training_run_records_the_scene_kind(ring: Path, tmp_path: Path) -> None:
     args = ["fourierf-vm", "--data", str(ring), "--output-dir", str(tmp_path / "out"), "--max-num-iterations", "4"]
     config, notes = train.build_config(train.parse_args([*args, *TINY_FLAGS, "nerfstudio-data", "--num-views", "3"]))
-    assert any(note.startswith("scene kind: object") for note in notes)
+    assert any(note.startswith("scene kind: unbounded") for note in notes)  # photos without alpha
     run_dir = train.Trainer(config).train()
     saved = json.loads((run_dir / "config.json").read_text())["config"]
     parser = saved["pipeline"]["datamanager"]["dataparser"]
-    assert parser["_type"] == "NerfstudioDataParserConfig" and parser["scene_kind"] == "object"
+    assert parser["_type"] == "NerfstudioDataParserConfig" and parser["scene_kind"] == "unbounded"
     assert parser["scene_kind_reason"].startswith("auto: ")
-    assert saved["pipeline"]["effects"]["ray_space"] == "euclidean"
+    assert saved["pipeline"]["effects"]["ray_space"] == "contracted"
     assert saved["pipeline"]["effects"]["background"] == "none"
     assert json.loads((run_dir / "views.json").read_text())[
         "train_view_ids"

@@ -24,6 +24,7 @@ was used and why. A field that never reaches an explicit level is reported, not 
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
@@ -37,6 +38,7 @@ from scipy import ndimage
 from skimage.measure import marching_cubes
 from torch import Tensor
 
+from fourierf_plugin.exporter.frames import NDC_NOTE, MeshFrame, Space, field_frame, map_mesh
 from fourierf_plugin.model_components.rendering import opacity_from_density
 from fourierf_plugin.utils.errors import UserError, fail
 from fourierf_plugin.utils.memory import available_memory, check_fits
@@ -56,10 +58,7 @@ SMALL_PIECE = 0.01
 DEFAULT_CHUNK = 2**18
 BYTES_PER_VERTEX = 12
 """An estimate of the export's memory per grid vertex: the float32 volume and marching cubes' own arrays."""
-NDC_NOTE = (
-    "mesh is in NDC space: x, y in [-1, 1] are screen coordinates of the reference camera, z = -1 is the near "
-    "plane and z = 1 is infinity (not metric world units)"
-)
+__all__ = ["NDC_NOTE", "MeshReport", "export_field_mesh"]
 
 
 @dataclass
@@ -83,7 +82,12 @@ class MeshReport:
     """Min and max of the sampled field (in ``level_kind`` units)."""
     resolution: tuple[int, int, int]
     bbox: tuple[tuple[float, float, float], tuple[float, float, float]]
-    space: Literal["world", "ndc"]
+    space: Space
+    """The coordinates of the written vertices: capture, normalised, ndc or contracted (``bbox`` and ``level`` are
+    always the field's own)."""
+    frame_note: str
+    """One line that says which frame the mesh is in and why."""
+    dropped_far_faces: int
     step: int
     frequency_cap: float | None
     seconds: float
@@ -348,21 +352,22 @@ def vertex_colors(
 
 
 def write_mesh(mesh: trimesh.Trimesh, path: Path) -> None:
-    """Write in the format of ``path``'s suffix, creating the parent folder."""
+    """Write in the format of ``path``'s suffix, creating the parent folder; a temporary sibling is renamed into
+    place, so an interrupted write never leaves a truncated mesh under the name."""
     file_type = check_suffix(path)
     path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        mesh.export(str(path), file_type=file_type)
+        mesh.export(str(tmp), file_type=file_type)
+        os.replace(tmp, path)
     except OSError as err:
         raise UserError(f"cannot write the mesh to {path}: {err}", "choose a writable --output-path") from err
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 # ---------------------------------------------------------------------------------------------------- trained model
-def model_space(model: Any) -> Literal["world", "ndc"]:
-    return "ndc" if model.effects.ray_space == "ndc" else "world"
-
-
 def export_field_mesh(
     model: Any,
     step: int,
@@ -376,12 +381,14 @@ def export_field_mesh(
     min_component_faces: int | None = None,
     keep_largest: int | None = None,
     chunk: int = DEFAULT_CHUNK,
+    frame: MeshFrame | None = None,
 ) -> MeshReport:
     """Marching cubes of a FourieRF/TensoRF model's density, written to ``output_path`` (None: not written).
 
     ``step`` picks the Fourier cutoffs (``model.cutoffs(step)``); ``frequency_cap`` f instead filters both density
     and colour grids at f, i.e. the coarse geometry the field holds below that share of the spectrum. ``bbox``
-    defaults to the model's current AABB. The model is left as it was (``field.filtered_at`` restores its filtering).
+    (field coordinates) defaults to the model's current AABB. ``frame`` says where the vertices are written (default:
+    the field's own coordinates). The model is left as it was (``field.filtered_at`` restores its filtering).
     """
     started = time.perf_counter()
     if output_path is not None:
@@ -429,6 +436,13 @@ def export_field_mesh(
             mesh.visual.vertex_colors = vertex_colors(
                 model.field.rgb, mesh.vertices, mesh.vertex_normals, model.effects.view_dependent, chunk, device
             )
+    frame = frame if frame is not None else field_frame(model.effects.ray_space)
+    mesh, dropped = map_mesh(mesh, frame)
+    if len(mesh.faces) == 0:
+        fail(
+            f"every face of the mesh lies beyond the scene's far bound once mapped to the {frame.space} frame",
+            "export with --frame field, or narrow the box with --bbox-min/--bbox-max",
+        )
     if output_path is not None:
         write_mesh(mesh, output_path)
     bounds = mesh.bounds
@@ -446,7 +460,9 @@ def export_field_mesh(
         field_range=field_range,
         resolution=reso,
         bbox=(tuple(lo.tolist()), tuple(hi.tolist())),
-        space=model_space(model),
+        space=frame.space,
+        frame_note=frame.note,
+        dropped_far_faces=dropped,
         step=int(step),
         frequency_cap=cap,
         seconds=time.perf_counter() - started,
@@ -466,14 +482,15 @@ def describe(report: MeshReport) -> list[str]:
         f"{r.vertices} vertices, {r.faces} faces, {r.components} component(s)"
         + (f" ({r.removed_components} small ones removed)" if r.removed_components else "")
         + f", watertight: {'yes' if r.watertight else 'no'}",
-        f"bounds {vec(r.bounds[0])} - {vec(r.bounds[1])} ({r.space} coordinates)",
+        f"bounds {vec(r.bounds[0])} - {vec(r.bounds[1])} ({r.space} frame)",
         f"level {r.level_kind} {r.level:.4g} ({r.level_reason}; field range {r.field_range[0]:.4g} .. "
         f"{r.field_range[1]:.4g}), "
         f"grid {r.resolution[0]}x{r.resolution[1]}x{r.resolution[2]}, {cutoff}",
         f"took {r.seconds:.2f}s (sampling {r.sample_seconds:.2f}s)",
     ]
-    if r.space == "ndc":
-        lines.append(NDC_NOTE)
+    lines.append(r.frame_note)
+    if r.dropped_far_faces:
+        lines.append(f"{r.dropped_far_faces} faces reaching beyond the scene's far bound left out")
     if r.path is not None:
         lines.append(f"wrote {r.path}")
     return lines

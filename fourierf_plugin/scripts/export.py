@@ -1,7 +1,8 @@
 """``fourierf-export marching-cubes --load-config RUN/config.json --output-path mesh.ply``: geometry out of a run.
 
 Subcommands (nerfstudio-style) so that other exporters (point clouds, TSDF) can join without changing the flags of
-this one.
+this one. Meshes are written in the capture's own frame by default (the parser's normalisation undone), so they
+overlay the COLMAP model or ``transforms.json`` they came from; an existing file is replaced only with --overwrite.
 """
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ from typing import Literal
 import tyro
 from rich.markup import escape
 
+from fourierf_plugin.data.dataparser_transforms import read_dataparser_transforms
+from fourierf_plugin.exporter.frames import Frame, MeshFrame, resolve_frame
 from fourierf_plugin.exporter.marching_cubes import (
     DEFAULT_CHUNK,
     MeshReport,
@@ -38,12 +41,19 @@ class MarchingCubesConfig(RunOptions):
 
     output_path: Path = Path("mesh.ply")
     """Mesh file; the format follows the suffix: .ply, .obj or .glb."""
+    overwrite: bool = False
+    """Replace --output-path when it already exists."""
+    frame: Frame = "capture"
+    """capture: the world frame of the poses the run was trained on (the COLMAP model, transforms.json or
+    poses_bounds.npy), the parser's normalisation undone; normalised: the run's normalised frame; field: the grid's
+    own coordinates (NDC for forward-facing runs, contracted coordinates for unbounded ones)."""
     resolution: int = 256
     """Grid vertices per axis (2-1024; memory and time grow with its cube)."""
     bbox_min: tuple[float, float, float] | None = None
-    """Lower corner of the sampled box (default: the model's current box)."""
+    """Lower corner of the sampled box, in the field's coordinates (default: the model's current box; for an
+    unbounded run, its part inside the inner cube [-1, 1]³, the object's region)."""
     bbox_max: tuple[float, float, float] | None = None
-    """Upper corner of the sampled box (default: the model's current box)."""
+    """Upper corner of the sampled box, in the field's coordinates (default as --bbox-min)."""
     level: Literal["auto"] | float = "auto"
     """Iso-level in --level-kind units; auto = the highest opacity in 0.5 ... 0.01 at which the object is one solid
     piece (the export says which)."""
@@ -67,6 +77,14 @@ Commands = tyro.extras.subcommand_type_from_defaults({"marching-cubes": Marching
 def check_options(cfg: MarchingCubesConfig) -> None:
     """Everything that can be checked without the model, before the (slow) load and sampling."""
     check_suffix(cfg.output_path)
+    if cfg.output_path.exists() and not cfg.overwrite:
+        what = "a folder" if cfg.output_path.is_dir() else "a file"
+        fail(
+            f"--output-path {cfg.output_path} already exists ({what})",
+            "choose another --output-path, or pass --overwrite to replace it",
+        )
+    if cfg.output_path.is_dir():
+        fail(f"--output-path {cfg.output_path} is a folder", "name a mesh file, e.g. mesh.ply")
     check_writable_dir(cfg.output_path.parent, "--output-path")
     check_resolution(cfg.resolution)
     check_frequency_cap(cfg.frequency_cap)
@@ -77,15 +95,34 @@ def check_options(cfg: MarchingCubesConfig) -> None:
         fail(f"--chunk {cfg.chunk} must be at least 1", f"e.g. --chunk {DEFAULT_CHUNK}")
 
 
+def mesh_frame(cfg: MarchingCubesConfig, run_dir: Path, ray_space: str, far: float) -> MeshFrame:
+    """The frame the mesh is written in (``--frame``), from the run's recorded ``dataparser_transforms.json``."""
+    try:
+        recorded = read_dataparser_transforms(run_dir)
+    except ValueError as err:
+        fail(str(err), "export with --frame normalised, or restore the file from the run")
+    return resolve_frame(cfg.frame, ray_space, recorded, far if ray_space == "contracted" else None)
+
+
+def default_box(aabb: list[list[float]], ray_space: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """The model's box; for an unbounded (contracted) run, its part inside the inner cube, where the object is and
+    the contraction leaves space as it is (the surroundings beyond are squeezed and left out)."""
+    if ray_space != "contracted":
+        return tuple(aabb[0]), tuple(aabb[1])
+    return tuple(max(v, -1.0) for v in aabb[0]), tuple(min(v, 1.0) for v in aabb[1])
+
+
 def run_marching_cubes(cfg: MarchingCubesConfig) -> MeshReport:
     console = get_console()
     check_options(cfg)
     run = cfg.load_run()
     model = run.pipeline.model
+    ray_space = model.effects.ray_space
+    frame = mesh_frame(cfg, run.run_dir, ray_space, float(model.far))
+    low, high = default_box(model.aabb.detach().cpu().tolist(), ray_space)
     bbox = None
-    if cfg.bbox_min is not None or cfg.bbox_max is not None:
-        aabb = model.aabb.detach().cpu().tolist()
-        bbox = (cfg.bbox_min or tuple(aabb[0]), cfg.bbox_max or tuple(aabb[1]))
+    if cfg.bbox_min is not None or cfg.bbox_max is not None or ray_space == "contracted":
+        bbox = (cfg.bbox_min or low, cfg.bbox_max or high)
     console.print(
         f"[bold]{run.config.method_name}[/bold] step {run.step} ({escape(str(run.checkpoint))}): "
         f"marching cubes at {cfg.resolution}³ on {run.device}",
@@ -104,6 +141,7 @@ def run_marching_cubes(cfg: MarchingCubesConfig) -> MeshReport:
         min_component_faces=cfg.min_component_faces,
         keep_largest=cfg.keep_largest,
         chunk=cfg.chunk,
+        frame=frame,
     )
     for line in describe(report):
         console.print("  " + escape(line), soft_wrap=True)

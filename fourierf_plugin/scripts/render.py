@@ -1,14 +1,22 @@
-"""``fourierf-render dataset|orbit|spiral --load-config RUN/config.json``: novel views as PNG frames and animations.
+"""``fourierf-render [auto|interpolate|arc|orbit|spiral|dataset] --load-config RUN/config.json``: novel views as PNG
+frames and animations.
 
-``dataset`` renders a split's own cameras (named after the views), ``orbit`` a Blender-style turntable around the
-object and ``spiral`` the LLFF spiral of forward-facing captures. Every requested output (rgb, depth coloured by a
-perceptual colormap, accumulation) is written as ``DIR/<output>/<frame>.png`` plus ``DIR/<output>.gif`` (and
-``.mp4`` when the optional imageio-ffmpeg plugin is installed).
+``interpolate`` moves through the training cameras, ``arc`` sweeps the angular range they cover about the scene's
+centre, ``orbit`` is a Blender-style turntable and ``spiral`` the LLFF spiral, both aimed at the scene's centre;
+``dataset`` renders a split's own cameras (named after the views). ``auto`` (also what runs when no mode is named)
+picks an orbit when the training cameras surround the scene and the interpolated path otherwise, so a partial capture
+is only shown from where it was photographed. Every requested output (rgb, depth coloured by a perceptual colormap,
+accumulation) is written as ``DIR/<output>/<frame>.png`` plus ``DIR/<output>.gif`` (and ``.mp4`` when the optional
+imageio-ffmpeg plugin is installed). Nothing already in a named ``--output-dir`` is replaced without
+``--overwrite``, and outputs are written beside their final names first and renamed into place when complete.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import os
+import shutil
 import sys
 import time
 from dataclasses import dataclass, field
@@ -19,10 +27,22 @@ import imageio.v3 as iio
 import numpy as np
 import tyro
 from rich.markup import escape
+from torch import Tensor
 
-from fourierf_plugin.cameras.camera_paths import orbit_from_cameras, scale_cameras, spiral_path
+from fourierf_plugin.cameras.camera_paths import (
+    arc_path,
+    captured_range,
+    interpolate_path,
+    llff_focus,
+    orbit_from_cameras,
+    scale_cameras,
+    scene_up,
+    spiral_path,
+    surrounds,
+)
 from fourierf_plugin.cameras.cameras import Cameras
 from fourierf_plugin.data.datamanager import camera_rays
+from fourierf_plugin.data.dataparser_base import DataparserOutputs
 from fourierf_plugin.engine.loading import LoadedRun
 from fourierf_plugin.engine.run_dir import unique_safe_name
 from fourierf_plugin.scripts.cli import run_cli, strip_verbose
@@ -40,7 +60,10 @@ class RenderConfig(RunOptions):
     """Options shared by every render mode."""
 
     output_dir: Path | None = None
-    """Where to write frames and animations (default: RUN/renders/<mode>-step<N>/)."""
+    """Where to write frames and animations (default: RUN/renders/<mode>-step<N>/, or a fresh -1, -2 ... beside it
+    when that exists)."""
+    overwrite: bool = False
+    """Replace outputs already in --output-dir (the <output>/ folders and animations of the same names)."""
     outputs: tuple[str, ...] = OUTPUT_NAMES
     """Which images to write: any of rgb, depth, accumulation."""
     resolution_scale: float = 1.0
@@ -74,13 +97,58 @@ class RenderDataset(RenderConfig):
 
 
 @dataclass
+class RenderInterpolate(RenderConfig):
+    """A path through the training cameras, in the order they were taken (nerfstudio's ``interpolate``)."""
+
+    steps_per_transition: int = 10
+    """Frames from one camera to the next (the cameras themselves are frames 0, k, 2k, ...)."""
+    order_poses: bool = True
+    """Sort the cameras along the capture first (the shortest nearest-neighbour path); else the split's order."""
+    split: Literal["train", "val", "test"] = "train"
+    """Whose cameras the path runs through."""
+
+    @property
+    def mode(self) -> str:
+        return "interpolate"
+
+
+@dataclass
+class RenderArc(RenderConfig):
+    """An arc about the scene's centre over the angular range the training cameras cover, at their mean distance
+    and height (a capture over part of a circle has seen nothing of the rest)."""
+
+    n_frames: int = 60
+    """Frames from one end of the arc to the other."""
+    span_scale: float = 1.0
+    """Shrink (or widen) the arc about its middle: 1 sweeps exactly the cameras' range."""
+
+    @property
+    def mode(self) -> str:
+        return "arc"
+
+
+@dataclass
+class RenderAuto(RenderConfig):
+    """An orbit when the training cameras surround the scene, else the path through them (interpolate)."""
+
+    n_frames: int = 60
+    """Frames of an orbit."""
+    steps_per_transition: int = 10
+    """Frames between consecutive cameras of an interpolated path."""
+
+    @property
+    def mode(self) -> str:
+        return "auto"
+
+
+@dataclass
 class RenderOrbit(RenderConfig):
-    """A turntable around the z axis at the training cameras' mean distance from the origin (object scenes)."""
+    """A turntable about the scene's up axis through its centre, at the training cameras' mean distance from it."""
 
     n_frames: int = 60
     """Frames in one full turn."""
     elevation_deg: float | None = None
-    """Camera elevation above the xy plane in degrees (default: the training cameras' mean elevation)."""
+    """Camera elevation above the scene's ground plane in degrees (default: the training cameras' mean elevation)."""
 
     @property
     def mode(self) -> str:
@@ -89,7 +157,8 @@ class RenderOrbit(RenderConfig):
 
 @dataclass
 class RenderSpiral(RenderConfig):
-    """The LLFF spiral around the training cameras' average pose (forward-facing scenes; works for any scene)."""
+    """The LLFF spiral around the training cameras' average pose, looking at the scene's centre (forward-facing
+    scenes; works for any scene)."""
 
     n_frames: int = 60
     """Frames along the whole spiral."""
@@ -100,9 +169,10 @@ class RenderSpiral(RenderConfig):
     radius_scale: float = 1.0
     """Scale of the spiral's radii (from the 90th percentile of the training cameras' spread)."""
     near: float | None = None
-    """Near bound for the focus depth, world units (default: the dataset's; LLFF: 0.9 x its nearest depth)."""
+    """With --far: look at LLFF's focus depth between these bounds in front of the average camera instead of the
+    scene's centre (world units; forward-facing scenes default to 0.9 x the nearest content depth)."""
     far: float | None = None
-    """Far bound for the focus depth, world units (default: the dataset's; LLFF: 5 x its farthest depth)."""
+    """With --near: see --near (forward-facing scenes default to 5 x the farthest content depth)."""
 
     @property
     def mode(self) -> str:
@@ -115,16 +185,24 @@ if TYPE_CHECKING:
 else:
     RenderCommand = tyro.extras.subcommand_type_from_defaults(
         {
-            "dataset": RenderDataset(load_config=_MISSING),
+            "auto": RenderAuto(load_config=_MISSING),
+            "interpolate": RenderInterpolate(load_config=_MISSING),
+            "arc": RenderArc(load_config=_MISSING),
             "orbit": RenderOrbit(load_config=_MISSING),
             "spiral": RenderSpiral(load_config=_MISSING),
+            "dataset": RenderDataset(load_config=_MISSING),
         },
         {
+            "auto": "The path that fits the capture: orbit when the cameras surround it, else interpolate "
+            "(the default when no mode is named).",
+            "interpolate": "Move through the training cameras (nerfstudio's interpolate).",
+            "arc": "Sweep the angular range the training cameras cover about the scene's centre.",
+            "orbit": "Render a turntable around the scene's centre (captures all around an object).",
+            "spiral": "Render the LLFF spiral, aimed at the scene's centre (forward-facing scenes).",
             "dataset": "Render the cameras of a dataset split (test by default).",
-            "orbit": "Render a turntable around the object (Blender-style scenes).",
-            "spiral": "Render the LLFF spiral (forward-facing scenes).",
         },
         prefix_names=False,
+        sort_subcommands=False,
     )
 
 
@@ -161,6 +239,11 @@ def validate(cfg: RenderConfig) -> list[str]:
     n_frames = getattr(cfg, "n_frames", 1)
     if n_frames < 1:
         fail(f"--n-frames must be >= 1, got {n_frames}", "use e.g. 60")
+    steps = getattr(cfg, "steps_per_transition", 1)
+    if steps < 1:
+        fail(f"--steps-per-transition must be >= 1, got {steps}", "use e.g. 10")
+    if isinstance(cfg, RenderArc) and not (math.isfinite(cfg.span_scale) and cfg.span_scale >= 0):
+        fail(f"--span-scale must be >= 0, got {cfg.span_scale}", "use 1 for the cameras' own range")
     if cfg.depth_near is not None and cfg.depth_far is not None and not cfg.depth_near < cfg.depth_far:
         fail(f"need --depth-near < --depth-far, got {cfg.depth_near} and {cfg.depth_far}", "swap or fix them")
     if isinstance(cfg, RenderOrbit) and cfg.elevation_deg is not None and not -90 <= cfg.elevation_deg <= 90:
@@ -169,6 +252,14 @@ def validate(cfg: RenderConfig) -> list[str]:
         fail(f"--radius-scale must be >= 0, got {cfg.radius_scale}", "use 1 for the cameras' own spread")
     if cfg.output_dir is not None and cfg.output_dir.exists() and not cfg.output_dir.is_dir():
         fail(f"--output-dir {cfg.output_dir} is an existing file", "choose a directory path")
+    if cfg.output_dir is not None and not cfg.overwrite:
+        taken = existing_outputs(cfg.output_dir, outputs)
+        if taken:
+            fail(
+                f"--output-dir {cfg.output_dir} already holds {', '.join(p.name for p in taken)} from an earlier "
+                "render",
+                "choose another --output-dir, or pass --overwrite to replace them",
+            )
     if not Path(cfg.load_config).exists():
         fail(
             f"config file not found: {cfg.load_config}",
@@ -195,8 +286,27 @@ def spiral_bounds(near: float, far: float, depth_bounds: tuple[float, float] | N
     return near, far
 
 
-def build_cameras(cfg: RenderConfig, run: LoadedRun) -> tuple[Cameras, list[str]]:
-    """The cameras of the chosen mode (before resolution scaling) and a file stem per frame."""
+def scene_target(outputs: DataparserOutputs, ray_space: str) -> Tensor:
+    """The scene's centre, where orbits, arcs and spirals look: the middle of the scene box (for a capture, the box
+    of its sparse points); for an NDC scene, whose box is in NDC units, LLFF's focus point in front of the average
+    camera."""
+    if ray_space == "ndc":
+        near, far = spiral_bounds(outputs.near, outputs.far, outputs.depth_bounds)
+        return llff_focus(outputs.cameras, near, far)
+    return outputs.scene_box.float().mean(dim=0)
+
+
+def _frame_stems(cameras: Cameras) -> list[str]:
+    return [f"frame_{i:05d}" for i in range(len(cameras))]
+
+
+def _path_error(mode: str, err: ValueError) -> None:
+    fail(f"cannot build the {mode} path: {err}", "render another mode (e.g. dataset), or check the run's cameras")
+
+
+def build_cameras(cfg: RenderConfig, run: LoadedRun) -> tuple[Cameras, list[str], str]:
+    """The cameras of the chosen mode (before resolution scaling), a file stem per frame, and the mode rendered
+    (``auto`` resolved)."""
     datamanager = run.pipeline.datamanager
     if isinstance(cfg, RenderDataset):
         outputs = datamanager.parser.get_outputs(cfg.split)
@@ -204,25 +314,60 @@ def build_cameras(cfg: RenderConfig, run: LoadedRun) -> tuple[Cameras, list[str]
             fail(
                 f"the {cfg.split} split of {datamanager.config.dataparser.data} has no views", "render another --split"
             )
-        return outputs.cameras, _unique_stems(outputs.image_names)
+        return outputs.cameras, _unique_stems(outputs.image_names), cfg.mode
     reference = datamanager.reference_outputs
-    if isinstance(cfg, RenderOrbit):
-        if run.pipeline.effects.ray_space == "ndc":
-            warn("this scene uses NDC rays (forward-facing): an orbit leaves the captured frustum; try `spiral`")
-        cameras = orbit_from_cameras(reference.cameras, cfg.n_frames, cfg.elevation_deg)
-    elif isinstance(cfg, RenderSpiral):
-        near, far = spiral_bounds(reference.near, reference.far, reference.depth_bounds)
-        near = near if cfg.near is None else cfg.near
-        far = far if cfg.far is None else cfg.far
-        try:
-            cameras = spiral_path(
-                reference.cameras, cfg.n_frames, near, far, cfg.n_rotations, cfg.zrate, cfg.radius_scale
-            )
-        except ValueError as err:
-            fail(f"cannot build the spiral: {err}", "pass --near and --far with 0 < near < far (scene units)")
-    else:  # pragma: no cover - tyro only builds the three modes
-        raise TypeError(f"unknown render mode {type(cfg).__name__}")
-    return cameras, [f"frame_{i:05d}" for i in range(len(cameras))]
+    ray_space = run.pipeline.effects.ray_space
+    target = scene_target(reference, ray_space)
+    up = scene_up(reference.cameras.camera_to_worlds)
+    console = get_console()
+    if isinstance(cfg, RenderAuto):
+        around = len(reference.cameras) > 1 and surrounds(reference.cameras.centers, target, up)
+        if around or len(reference.cameras) == 1:
+            cfg = RenderOrbit(**{**_shared(cfg), "n_frames": cfg.n_frames})
+        else:
+            cfg = RenderInterpolate(**{**_shared(cfg), "steps_per_transition": cfg.steps_per_transition})
+        why = "surround the scene" if around else "cover part of a circle about the scene"
+        if len(reference.cameras) == 1:
+            why = "are a single view"
+        console.print(f"auto: the training cameras {why}: rendering `{cfg.mode}`")
+    try:
+        if isinstance(cfg, RenderInterpolate):
+            source = reference if cfg.split == "train" else datamanager.parser.get_outputs(cfg.split)
+            cameras = interpolate_path(source.cameras, cfg.steps_per_transition, cfg.order_poses)
+        elif isinstance(cfg, RenderArc):
+            _, span = captured_range(reference.cameras.centers, target, up)
+            console.print(f"arc over the {math.degrees(span) * cfg.span_scale:.0f}° the training cameras cover")
+            cameras = arc_path(reference.cameras, target, cfg.n_frames, up, cfg.span_scale)
+        elif isinstance(cfg, RenderOrbit):
+            if ray_space == "ndc":
+                warn("this scene uses NDC rays (forward-facing): an orbit leaves the captured frustum; try `spiral`")
+            elif len(reference.cameras) > 1 and not surrounds(reference.cameras.centers, target, up):
+                span = math.degrees(captured_range(reference.cameras.centers, target, up)[1])
+                warn(
+                    f"the training cameras cover {span:.0f}° about the scene's centre: most of an orbit shows what "
+                    "no photo saw; try `arc` or `interpolate`"
+                )
+            cameras = orbit_from_cameras(reference.cameras, cfg.n_frames, cfg.elevation_deg, target, up)
+        elif isinstance(cfg, RenderSpiral):
+            if cfg.near is not None or cfg.far is not None:
+                near, far = spiral_bounds(reference.near, reference.far, reference.depth_bounds)
+                near = near if cfg.near is None else cfg.near
+                far = far if cfg.far is None else cfg.far
+                try:
+                    target = llff_focus(reference.cameras, near, far)
+                except ValueError as err:
+                    fail(f"cannot build the spiral: {err}", "pass --near and --far with 0 < near < far (scene units)")
+            cameras = spiral_path(reference.cameras, cfg.n_frames, target, cfg.n_rotations, cfg.zrate, cfg.radius_scale)
+        else:  # pragma: no cover - tyro only builds the modes above
+            raise TypeError(f"unknown render mode {type(cfg).__name__}")
+    except ValueError as err:
+        _path_error(cfg.mode, err)
+    return cameras, _frame_stems(cameras), cfg.mode
+
+
+def _shared(cfg: RenderConfig) -> dict:
+    """The options every mode shares, to hand ``auto``'s choice the user's settings."""
+    return {f.name: getattr(cfg, f.name) for f in dataclasses.fields(RenderConfig)}
 
 
 BYTES_PER_PIXEL = 100
@@ -244,6 +389,49 @@ def check_frame_fits(width: int, height: int, scale: float, available: int | Non
 
 
 # -- writing ------------------------------------------------------------------------------------------------------
+ANIMATION_SUFFIXES = (".gif", ".mp4")
+
+
+def existing_outputs(output_dir: Path, outputs: list[str]) -> list[Path]:
+    """What a render of ``outputs`` into ``output_dir`` would replace: non-empty ``<output>/`` folders and
+    ``<output>.gif``/``.mp4`` files already there."""
+    taken = []
+    for name in outputs:
+        folder = Path(output_dir) / name
+        if folder.exists() and (not folder.is_dir() or any(folder.iterdir())):
+            taken.append(folder)
+        taken += [p for p in (Path(output_dir) / f"{name}{s}" for s in ANIMATION_SUFFIXES) if p.exists()]
+    return taken
+
+
+def default_output_dir(run_dir: Path, mode: str, step: int, overwrite: bool) -> Path:
+    """RUN/renders/<mode>-step<N>/, or with --overwrite that folder again; else the first free ``-1``, ``-2`` ...
+    beside it, so a second render of the same mode keeps the first."""
+    base = run_dir / "renders" / f"{mode}-step{step:06d}"
+    if overwrite or not base.exists():
+        return base
+    n = 1
+    while base.with_name(f"{base.name}-{n}").exists():
+        n += 1
+    return base.with_name(f"{base.name}-{n}")
+
+
+def _staging(final: Path) -> Path:
+    """A hidden sibling of ``final`` that the work is written to before it is renamed into place."""
+    return final.with_name(f".{final.name}.partial-{os.getpid()}{final.suffix}")
+
+
+def _commit_dir(staged: Path, final: Path) -> None:
+    """Put a finished folder in place of ``final`` (an earlier one, allowed by --overwrite, is removed)."""
+    old = None
+    if final.exists():
+        old = final.with_name(f".{final.name}.old-{os.getpid()}")
+        final.rename(old)
+    staged.rename(final)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
 def _mkdir(path: Path) -> None:
     try:
         path.mkdir(parents=True, exist_ok=True)
@@ -273,19 +461,28 @@ def write_animations(name: str, paths: list[Path], output_dir: Path, fps: float,
     """
     frames = [iio.imread(p) for p in paths]
     gif = output_dir / f"{name}.gif"
-    iio.imwrite(gif, np.stack(frames), duration=1000.0 / fps, loop=0)
+    staged = _staging(gif)
+    try:
+        iio.imwrite(staged, np.stack(frames), duration=1000.0 / fps, loop=0)
+        os.replace(staged, gif)
+    finally:
+        staged.unlink(missing_ok=True)
     written = [gif]
     if mp4:
         import imageio.v2 as iio2
 
         video = output_dir / f"{name}.mp4"
+        staged = _staging(video)
         try:
-            with iio2.get_writer(video, format="FFMPEG", fps=fps, codec="libx264", macro_block_size=1) as writer:
+            with iio2.get_writer(staged, format="FFMPEG", fps=fps, codec="libx264", macro_block_size=1) as writer:
                 for frame in frames:
                     writer.append_data(_even(frame))
+            os.replace(staged, video)
             written.append(video)
         except Exception as err:  # the video is an extra: the frames and the GIF are already written
             warn(f"could not write {video}: {err}")
+        finally:
+            staged.unlink(missing_ok=True)
     return written
 
 
@@ -311,21 +508,54 @@ def render(cfg: RenderConfig) -> RenderResult:
     outputs = validate(cfg)
     console = get_console()
     run = cfg.load_run()
-    cameras, stems = build_cameras(cfg, run)
+    cameras, stems, mode = build_cameras(cfg, run)
     cameras = scale_cameras(cameras, cfg.resolution_scale)
     check_frame_fits(cameras.width, cameras.height, cfg.resolution_scale)
-    output_dir = cfg.output_dir or run.run_dir / "renders" / f"{cfg.mode}-step{run.step:06d}"
-    for name in outputs:
-        _mkdir(output_dir / name)
+    output_dir = cfg.output_dir or default_output_dir(run.run_dir, mode, run.step, cfg.overwrite)
+    _mkdir(output_dir)
+    staged = {name: _staging(output_dir / name) for name in outputs}
+    try:
+        for folder in staged.values():
+            shutil.rmtree(folder, ignore_errors=True)
+            _mkdir(folder)
+        result = _render_frames(cfg, run, cameras, stems, mode, outputs, staged, output_dir)
+        for name in outputs:
+            _commit_dir(staged[name], output_dir / name)
+            result.frames[name] = [output_dir / name / p.name for p in result.frames[name]]
+    finally:
+        for folder in staged.values():
+            shutil.rmtree(folder, ignore_errors=True)
 
+    for name in outputs:
+        console.print(f"  {name}: {len(result.frames[name])} frames in {escape(str(output_dir / name))}/")
+    for path in result.animations:
+        console.print(f"  {escape(str(path))}")
+    console.print(
+        f"[bold]rendered {len(cameras)} frames[/bold] in {format_duration(result.seconds_per_frame * len(cameras))} "
+        f"({result.seconds_per_frame:.3f} s/frame)"
+    )
+    return result
+
+
+def _render_frames(
+    cfg: RenderConfig,
+    run: LoadedRun,
+    cameras: Cameras,
+    stems: list[str],
+    mode: str,
+    outputs: list[str],
+    staged: dict[str, Path],
+    output_dir: Path,
+) -> RenderResult:
+    """Every frame into the ``staged`` folders, then the animations (renamed into place in ``output_dir``)."""
+    console = get_console()
     model = run.pipeline.model
     model.eval()
     ray_space = run.pipeline.datamanager.ray_space  # NDC for forward-facing scenes, as in training
     result = RenderResult(output_dir, {name: [] for name in outputs}, [], 0.0, cameras.width, cameras.height, run.step)
     limits: list[float | None] = [cfg.depth_near, cfg.depth_far]
     console.print(
-        f"rendering {len(cameras)} frames of {cameras.width}x{cameras.height} ({cfg.mode}, step {run.step}) "
-        f"on {run.device}"
+        f"rendering {len(cameras)} frames of {cameras.width}x{cameras.height} ({mode}, step {run.step}) on {run.device}"
     )
     render_seconds = 0.0
     with TaskProgress(len(cameras), unit="frame") as progress:
@@ -336,7 +566,7 @@ def render(cfg: RenderConfig) -> RenderResult:
             images = _frame_images(out, cameras.height, cameras.width, outputs, cfg, limits)
             render_seconds += time.perf_counter() - start
             for name, image in images.items():
-                path = output_dir / name / f"{stem}.png"
+                path = staged[name] / f"{stem}.png"
                 iio.imwrite(path, image)
                 result.frames[name].append(path)
             progress.update(i + 1)
@@ -348,20 +578,14 @@ def render(cfg: RenderConfig) -> RenderResult:
             result.animations += write_animations(name, result.frames[name], output_dir, cfg.fps, mp4)
         if not mp4:
             console.print("note: no MP4 (install the video extra, `pip install imageio-ffmpeg`, to get one)")
-
-    for name in outputs:
-        console.print(f"  {name}: {len(result.frames[name])} frames in {escape(str(output_dir / name))}/")
-    for path in result.animations:
-        console.print(f"  {escape(str(path))}")
-    console.print(
-        f"[bold]rendered {len(cameras)} frames[/bold] in {format_duration(render_seconds)} "
-        f"({result.seconds_per_frame:.3f} s/frame)"
-    )
     return result
 
 
 def main(args: list[str] | None = None) -> RenderResult:
-    cfg = tyro.cli(RenderCommand, args=strip_verbose(sys.argv[1:] if args is None else args))
+    argv = strip_verbose(sys.argv[1:] if args is None else args)
+    if argv and argv[0].startswith("--") and argv[0] != "--help":
+        argv = ["auto", *argv]  # no mode named: the path that fits the capture
+    cfg = tyro.cli(RenderCommand, args=argv)
     return render(cfg)
 
 

@@ -8,7 +8,9 @@ even when the export fails.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,6 +19,7 @@ import pytest
 import torch
 import trimesh
 
+from fourierf_plugin.data.dataparser_transforms import FILE_NAME, DataparserTransform, write_dataparser_transforms
 from fourierf_plugin.engine.loading import load_run
 from fourierf_plugin.exporter.marching_cubes import (
     AUTO_OPACITIES,
@@ -290,7 +293,7 @@ def test_cli_exports_a_trained_run(tiny: TinyRun, tmp_path: Path, capsys) -> Non
     voxel_size = (aabb[1] - aabb[0]).max() / 31
     assert (loaded.bounds[0] >= aabb[0] - voxel_size).all() and (loaded.bounds[1] <= aabb[1] + voxel_size).all()
     assert np.asarray(loaded.visual.vertex_colors).shape == (report.vertices, 4)
-    assert report.space == "world" and report.level == pytest.approx(level)
+    assert report.space == "capture" and report.level == pytest.approx(level), "Blender poses: the capture's frame"
     printed = capsys.readouterr().out
     assert f"{report.vertices} vertices, {report.faces} faces" in printed and "watertight" in printed
     assert "took" in printed and str(out) in printed
@@ -372,3 +375,63 @@ def test_a_grid_over_the_available_memory_is_refused_before_sampling(
         export_field_mesh(tiny.model, tiny.step, None, resolution=64)
     assert "64x64x64 marching-cubes grid (--resolution)" in info.value.problem
     assert info.value.fix == "pass at most --resolution 40 on this machine"
+
+
+# -- the frame of the mesh, and what is already there ----------------------------------------------------------------
+def _copy_run(tiny: TinyRun, where: Path) -> Path:
+    """A copy of the tiny run's folder (its config, checkpoints and recorded frame) to change safely."""
+    return Path(shutil.copytree(tiny.config.parent, where / "run")) / "config.json"
+
+
+def _export(config: Path, out: Path, *extra: str) -> object:
+    args = ["marching-cubes", "--load-config", str(config), "--output-path", str(out), "--resolution", "16"]
+    return export_script.main([*args, "--device", "cpu", *extra])
+
+
+@pytest.mark.slow
+def test_the_trainer_records_the_runs_frame(tiny: TinyRun) -> None:
+    record = json.loads((tiny.config.parent / FILE_NAME).read_text())
+    assert np.allclose(record["transform"], np.eye(4)[:3]) and record["scale"] == 1.0, "Blender: used as given"
+    assert "ndc" not in record
+
+
+@pytest.mark.slow
+def test_meshes_go_back_to_the_capture_frame_unless_asked_to_stay(tiny: TinyRun, tmp_path: Path, capsys) -> None:
+    config = _copy_run(tiny, tmp_path)
+    angle = math.radians(30.0)
+    rotation = np.array([[math.cos(angle), -math.sin(angle), 0], [math.sin(angle), math.cos(angle), 0], [0, 0, 1]])
+    transform = DataparserTransform(np.concatenate([rotation, [[0.5], [-1.0], [2.0]]], axis=1), 0.25)
+    write_dataparser_transforms(config.parent, transform)
+    normalised = _export(config, tmp_path / "normalised.ply", "--frame", "normalised")
+    assert normalised.space == "normalised" and "normalised frame" in capsys.readouterr().out
+    captured = _export(config, tmp_path / "capture.ply")
+    printed = capsys.readouterr().out
+    assert captured.space == "capture" and "capture's frame" in printed and FILE_NAME in printed
+    a = trimesh.load(tmp_path / "normalised.ply", process=False)
+    b = trimesh.load(tmp_path / "capture.ply", process=False)
+    np.testing.assert_allclose(b.vertices, transform.to_capture(a.vertices), atol=1e-4)
+    np.testing.assert_array_equal(a.faces, b.faces)
+    assert b.volume * a.volume > 0 and abs(b.volume) == pytest.approx(abs(a.volume) / 0.25**3, rel=1e-3)
+
+
+@pytest.mark.slow
+def test_a_run_without_its_frame_exports_normalised_and_says_so(tiny: TinyRun, tmp_path: Path, capsys) -> None:
+    config = _copy_run(tiny, tmp_path)
+    (config.parent / FILE_NAME).unlink()
+    report = _export(config, tmp_path / "mesh.ply")
+    assert report.space == "normalised"
+    assert f"has no {FILE_NAME}" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_an_existing_mesh_is_replaced_only_with_overwrite(tiny: TinyRun, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "mesh.ply"
+    out.write_text("mine")
+    args = ["marching-cubes", "--load-config", str(tiny.config), "--output-path", str(out), "--resolution", "16"]
+    assert cli_exit_code(export_script.main, args) == EXIT_USER_ERROR
+    err = capsys.readouterr().err
+    assert "already exists" in err and "--overwrite" in err
+    assert out.read_text() == "mine"
+    _export(tiny.config, out, "--overwrite")
+    assert len(trimesh.load(out, process=False).faces) > 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mesh.ply"], "no temporary file left beside it"

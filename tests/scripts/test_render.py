@@ -21,6 +21,7 @@ from tests.helpers import (
     REPO_ROOT,
     TINY_IMAGE_SIZE,
     TINY_TEST_VIEWS,
+    TINY_TRAIN_NAMES,
     cli_exit_code,
     train_tiny,
     venv_script,
@@ -123,6 +124,9 @@ def test_spiral_defaults_to_the_run_directory_and_no_video_skips_gifs(run_config
         (["orbit", "--elevation-deg", "120"], "--elevation-deg"),
         (["orbit", "--fps", "0"], "--fps"),
         (["spiral", "--near", "0", "--far", "1", "--n-frames", "1"], "spiral"),
+        (["interpolate", "--steps-per-transition", "0"], "--steps-per-transition"),
+        (["arc", "--span-scale", "-1"], "--span-scale"),
+        (["arc", "--n-frames", "0"], "--n-frames"),
     ],
 )
 def test_bad_options_exit_2_with_a_message(run_config: Path, tmp_path: Path, capsys, extra, message) -> None:
@@ -152,7 +156,7 @@ def test_spiral_bounds_use_metric_depths_of_ndc_scenes() -> None:
 
 
 def test_subcommands_have_help(capsys) -> None:
-    for mode in ("dataset", "orbit", "spiral"):
+    for mode in ("auto", "interpolate", "arc", "orbit", "spiral", "dataset"):
         with pytest.raises(SystemExit) as info:
             main([mode, "--help"])
         assert info.value.code == 0
@@ -173,3 +177,51 @@ def test_console_script_reports_a_missing_config_cleanly(tmp_path: Path) -> None
     )
     assert proc.returncode == EXIT_USER_ERROR
     assert "config file not found" in proc.stderr and "Traceback" not in proc.stderr
+
+
+# -- paths that fit the capture, and what is already on disk ---------------------------------------------------------
+def _quick(run_config: Path, *args: str) -> list[str]:
+    return [*args, "--load-config", str(run_config), "--resolution-scale", "0.2", "--outputs", "rgb"]
+
+
+def test_interpolate_renders_a_frame_per_step_through_the_training_views(run_config: Path, tmp_path: Path) -> None:
+    out = tmp_path / "interpolate"
+    result = main([*_quick(run_config, "interpolate"), "--steps-per-transition", "2", "--output-dir", str(out)])
+    frames = sorted((out / "rgb").glob("*.png"))
+    assert len(frames) == (len(TINY_TRAIN_NAMES) - 1) * 2 + 1 and result.frames["rgb"] == frames
+    assert (out / "rgb.gif").is_file()
+    assert not [p for p in out.iterdir() if p.name.startswith(".")], "no staging folder or file left"
+
+
+def test_arc_says_the_range_it_sweeps(run_config: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "arc"
+    main([*_quick(run_config, "arc"), "--n-frames", "3", "--no-video", "--output-dir", str(out)])
+    assert len(list((out / "rgb").glob("*.png"))) == 3
+    assert re.search(r"arc over the \d+° the training cameras cover", capsys.readouterr().out)
+
+
+def test_no_mode_renders_the_path_that_fits_the_capture(run_config: Path, capsys) -> None:
+    result = main([*_quick(run_config), "--n-frames", "2", "--steps-per-transition", "1", "--no-video"])
+    printed = capsys.readouterr().out
+    chosen = re.search(r"auto: the training cameras .*: rendering `(orbit|interpolate)`", printed)
+    assert chosen, printed
+    assert result.output_dir.name.startswith(f"{chosen.group(1)}-step")
+
+
+def test_a_second_render_never_replaces_the_first_without_overwrite(run_config: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "mine"
+    args = [*_quick(run_config, "arc"), "--n-frames", "2", "--output-dir", str(out)]
+    main(args)
+    first = {p: p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+    assert cli_exit_code(main, [*args, "--n-frames", "3"]) == EXIT_USER_ERROR
+    err = capsys.readouterr().err
+    assert "already holds rgb, rgb.gif" in err and "--overwrite" in err
+    assert {p: p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()} == first, "left as it was"
+    main([*args, "--n-frames", "3", "--overwrite"])
+    assert len(list((out / "rgb").glob("*.png"))) == 3
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+    # the run's own renders folder: a second render of the same mode goes beside the first
+    default = [*_quick(run_config, "arc"), "--n-frames", "1", "--no-video"]
+    one, two = main(default), main(default)
+    assert two.output_dir == one.output_dir.with_name(one.output_dir.name + "-1")
+    assert (one.output_dir / "rgb" / "frame_00000.png").is_file()

@@ -310,6 +310,7 @@ class CaptureParser(DataParser):
             scene_name=self.scene_name(),
             source_files=[f.image_path for f in frames],
             depth_bounds=scene.depth_bounds,
+            object_box=None if scene.object_box is None else (tuple(scene.object_box[0]), tuple(scene.object_box[1])),
             dataparser_transform=self.dataparser_transform(),
         )
 

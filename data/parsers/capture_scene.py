@@ -34,6 +34,12 @@ BOX_PADDING = 0.05
 """... padded by this share of its size on each side."""
 MIN_BOX_POINTS = 10
 """Fewer sparse points than this say nothing about where the object is: the box then comes from the cameras."""
+SEEN_BY_SHARE = 0.9
+"""An unbounded capture's object is where the sparse points seen by this share of the cameras lie: a capture's cameras
+keep the object in frame, while its surroundings drift in and out."""
+OBJECT_BOX_PADDING = 0.15
+"""The object's box is padded more than a scene box: sparse points thin out at an object's silhouette, and a mesh
+cut at the box must not lose the object's top."""
 OBJECT_NEAR = 0.05
 """Near plane of an object scene, in its units (the cameras fit the unit box): rays never sample at the lens."""
 UNBOUNDED_FAR = 1000.0
@@ -57,6 +63,7 @@ class NormalisedScene:
     near: float
     far: float
     depth_bounds: tuple[float, float] | None  # metric (near, far) of the content of a forward-facing scene
+    object_box: np.ndarray | None = None  # [2, 3] an unbounded scene's object: what (nearly) every camera sees
 
 
 def camera_to_worlds(capture: Capture) -> np.ndarray:
@@ -249,8 +256,28 @@ def normalise_object(capture: Capture, orientation: Orientation, scene_scale: fl
 def normalise_unbounded(capture: Capture, orientation: Orientation) -> NormalisedScene:
     """An object with its surroundings: posed as an object capture (the cameras fit the inner cube [-1, 1]³ about
     their focus), everything beyond the inner cube contracted (mip-NeRF 360); the grid covers the contracted box."""
-    c2w, _, _ = _upright_centred(capture, orientation)
-    return NormalisedScene(c2w, np.asarray(CONTRACTED_BOX, dtype=np.float64), OBJECT_NEAR, UNBOUNDED_FAR, None)
+    c2w, points, _ = _upright_centred(capture, orientation)
+    box = np.asarray(CONTRACTED_BOX, dtype=np.float64)
+    return NormalisedScene(c2w, box, OBJECT_NEAR, UNBOUNDED_FAR, None, _box_seen_by_most(c2w, capture, points))
+
+
+def _box_seen_by_most(c2w: np.ndarray, capture: Capture, points: np.ndarray) -> np.ndarray | None:
+    """The object's box of an unbounded scene: the sparse points in front of and inside the image of at least
+    ``SEEN_BY_SHARE`` of the cameras (robust percentiles, padded), cut to the inner cube; None with too few."""
+    seen = np.zeros(len(points), dtype=np.int64)
+    for pose, k in zip(c2w, _intrinsics(capture), strict=True):
+        local = (points - pose[:, 3]) @ pose[:, :3]  # camera coordinates, OpenGL: looking down -z
+        depth = -local[:, 2]
+        safe = np.where(depth > 1e-9, depth, 1.0)
+        u = k.fx * local[:, 0] / safe + k.cx
+        v = -k.fy * local[:, 1] / safe + k.cy
+        seen += (depth > 1e-9) & (u >= 0) & (u <= k.width) & (v >= 0) & (v <= k.height)
+    kept = points[seen >= SEEN_BY_SHARE * len(c2w)]
+    if len(kept) < MIN_BOX_POINTS:
+        return None
+    low, high = np.percentile(kept, BOX_PERCENTILES, axis=0)
+    pad = OBJECT_BOX_PADDING * (high - low)
+    return np.stack([np.maximum(low - pad, -1.0), np.minimum(high + pad, 1.0)])
 
 
 def share_beyond_cameras(capture: Capture, orientation: Orientation) -> float | None:

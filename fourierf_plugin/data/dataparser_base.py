@@ -36,6 +36,8 @@ class DataparserOutputs:
     depth_bounds: tuple[float, float] | None = None  # metric (near, far) of the content, e.g. for spiral paths in NDC
     dataparser_transform: DataparserTransform | None = None
     """The map from the capture's world frame to the poses above (None: not known, meshes stay normalised)."""
+    object_box: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+    """An unbounded scene's object, in the poses' frame (None: not known); meshes are cut to it by default."""
 
 
 @dataclass

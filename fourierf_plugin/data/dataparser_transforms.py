@@ -124,11 +124,15 @@ def fit_transform(before: np.ndarray, after: np.ndarray) -> DataparserTransform 
     return DataparserTransform(np.concatenate([linear, (shift / scale)[:, None]], axis=1), scale)
 
 
-def write_dataparser_transforms(run_dir: Path, transform: DataparserTransform, ndc: NdcFrame | None = None) -> Path:
+def write_dataparser_transforms(
+    run_dir: Path, transform: DataparserTransform, ndc: NdcFrame | None = None, object_box: Any = None
+) -> Path:
     """``run_dir/dataparser_transforms.json`` (a temporary sibling renamed into place)."""
     record = transform.as_json()
     if ndc is not None:
         record["ndc"] = ndc.as_json()
+    if object_box is not None:
+        record["object_box"] = [[float(v) for v in corner] for corner in object_box]
     path = Path(run_dir) / FILE_NAME
     tmp = path.with_name(f".{FILE_NAME}.tmp-{os.getpid()}")
     tmp.write_text(json.dumps(record, indent=2) + "\n")
@@ -151,7 +155,7 @@ def write_run_frame(run_dir: Path, outputs: Any, ray_space: str) -> Path | None:
         cameras = outputs.cameras
         far = None if outputs.depth_bounds is None else NDC_FAR_MARGIN * float(outputs.depth_bounds[1])
         ndc = NdcFrame(float(cameras.fx[0]), int(cameras.width), int(cameras.height), 1.0, far)
-    return write_dataparser_transforms(run_dir, outputs.dataparser_transform, ndc)
+    return write_dataparser_transforms(run_dir, outputs.dataparser_transform, ndc, outputs.object_box)
 
 
 @dataclass(frozen=True)
@@ -161,6 +165,8 @@ class RunFrame:
     transform: DataparserTransform
     ndc: NdcFrame | None
     path: Path
+    object_box: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+    """An unbounded scene's object in the normalised frame, where the parser could tell."""
 
 
 def read_dataparser_transforms(run_dir: Path) -> RunFrame | None:
@@ -174,6 +180,13 @@ def read_dataparser_transforms(run_dir: Path) -> RunFrame | None:
         transform = np.asarray(record["transform"], dtype=np.float64)
         scale = float(record["scale"])
         ndc = record.get("ndc")
+        box = record.get("object_box")
+        object_box = None
+        if box is not None:
+            corners = np.asarray(box, dtype=np.float64)
+            if corners.shape != (2, 3) or not np.isfinite(corners).all() or not (corners[0] < corners[1]).all():
+                raise ValueError("'object_box' must be [[min x, y, z], [max x, y, z]] with min < max")
+            object_box = (tuple(corners[0].tolist()), tuple(corners[1].tolist()))
         frame = None
         if ndc is not None:
             far = ndc.get("far")
@@ -190,4 +203,4 @@ def read_dataparser_transforms(run_dir: Path) -> RunFrame | None:
         raise ValueError(f"{path} needs a finite 3x4 'transform' and a positive 'scale'")
     if abs(np.linalg.det(transform[:, :3])) < 1e-12:
         raise ValueError(f"{path}: the 'transform' is singular")
-    return RunFrame(DataparserTransform(transform, scale), frame, path)
+    return RunFrame(DataparserTransform(transform, scale), frame, path, object_box)

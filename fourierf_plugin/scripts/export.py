@@ -15,7 +15,7 @@ from typing import Literal
 import tyro
 from rich.markup import escape
 
-from fourierf_plugin.data.dataparser_transforms import read_dataparser_transforms
+from fourierf_plugin.data.dataparser_transforms import RunFrame, read_dataparser_transforms
 from fourierf_plugin.exporter.frames import Frame, MeshFrame, resolve_frame
 from fourierf_plugin.exporter.marching_cubes import (
     DEFAULT_CHUNK,
@@ -95,21 +95,31 @@ def check_options(cfg: MarchingCubesConfig) -> None:
         fail(f"--chunk {cfg.chunk} must be at least 1", f"e.g. --chunk {DEFAULT_CHUNK}")
 
 
-def mesh_frame(cfg: MarchingCubesConfig, run_dir: Path, ray_space: str, far: float) -> MeshFrame:
-    """The frame the mesh is written in (``--frame``), from the run's recorded ``dataparser_transforms.json``."""
+def recorded_frame(run_dir: Path) -> RunFrame | None:
+    """The run's ``dataparser_transforms.json`` (None: an older run without one); a broken one is a clear error."""
     try:
-        recorded = read_dataparser_transforms(run_dir)
+        return read_dataparser_transforms(run_dir)
     except ValueError as err:
         fail(str(err), "export with --frame normalised, or restore the file from the run")
+
+
+def mesh_frame(cfg: MarchingCubesConfig, recorded: RunFrame | None, ray_space: str, far: float) -> MeshFrame:
+    """The frame the mesh is written in (``--frame``), from the run's recorded transform."""
     return resolve_frame(cfg.frame, ray_space, recorded, far if ray_space == "contracted" else None)
 
 
-def default_box(aabb: list[list[float]], ray_space: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """The model's box; for an unbounded (contracted) run, its part inside the inner cube, where the object is and
-    the contraction leaves space as it is (the surroundings beyond are squeezed and left out)."""
+def default_box(
+    aabb: list[list[float]], ray_space: str, object_box: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """The model's box; for an unbounded (contracted) run, the object's box where the parser recorded one, else the
+    model's box inside the inner cube, where the contraction leaves space as it is (the surroundings are left out)."""
     if ray_space != "contracted":
         return tuple(aabb[0]), tuple(aabb[1])
-    return tuple(max(v, -1.0) for v in aabb[0]), tuple(min(v, 1.0) for v in aabb[1])
+    low, high = object_box if object_box is not None else ((-1.0,) * 3, (1.0,) * 3)
+    return (
+        tuple(max(v, b) for v, b in zip(aabb[0], low, strict=True)),
+        tuple(min(v, b) for v, b in zip(aabb[1], high, strict=True)),
+    )
 
 
 def run_marching_cubes(cfg: MarchingCubesConfig) -> MeshReport:
@@ -118,8 +128,10 @@ def run_marching_cubes(cfg: MarchingCubesConfig) -> MeshReport:
     run = cfg.load_run()
     model = run.pipeline.model
     ray_space = model.effects.ray_space
-    frame = mesh_frame(cfg, run.run_dir, ray_space, float(model.far))
-    low, high = default_box(model.aabb.detach().cpu().tolist(), ray_space)
+    recorded = recorded_frame(run.run_dir)
+    frame = mesh_frame(cfg, recorded, ray_space, float(model.far))
+    object_box = None if recorded is None else recorded.object_box
+    low, high = default_box(model.aabb.detach().cpu().tolist(), ray_space, object_box)
     bbox = None
     if cfg.bbox_min is not None or cfg.bbox_max is not None or ray_space == "contracted":
         bbox = (cfg.bbox_min or low, cfg.bbox_max or high)

@@ -13,10 +13,13 @@ Why in this package: nerfstudio's own route needs the COLMAP binary installed se
 
 from __future__ import annotations
 
+import math
+import shlex
 import shutil
 import sys
 import time
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import Annotated
 
@@ -58,6 +61,8 @@ class _Sfm:
     """Lens model COLMAP fits: OPENCV (phones, most lenses), PINHOLE, SIMPLE_RADIAL, OPENCV_FISHEYE (fisheye)."""
     max_image_size: int = 1600
     """SIFT sees photos shrunk to this longer side (faster on CPU); poses stay full-resolution. 0: full size."""
+    threads: int | None = None
+    """CPU threads for SIFT extraction, matching, mapping and the downscaled copies. Default: all cores."""
 
 
 @dataclass(kw_only=True)
@@ -135,16 +140,33 @@ def prepare_output(cfg: _Output) -> Path:
 
 def _gather_photos(cfg: ImagesCommand | VideoCommand, images_dir: Path, display: StageDisplay) -> list[Path]:
     if isinstance(cfg, VideoCommand):
-        with display.stage(f"extracting {cfg.num_frames} frames of {cfg.data.name}") as stage:
+        written = partial(_count_files, images_dir)  # frames are written one by one as the clip is decoded
+        title = f"extracting {cfg.num_frames} frames of {cfg.data.name}"
+        with display.stage(title, total=cfg.num_frames, unit="frames", poll=written) as stage:
             frames = extract_frames(cfg.data, images_dir, cfg.num_frames)
             stage.detail = f"{len(frames)} frames"
         return frames
     photos = list_photos(cfg.data)
     check_photo_count(photos, cfg.data)
-    with display.stage(f"copying {len(photos)} photos") as stage:
-        copies = copy_photos(photos, images_dir)
+    with display.stage(f"copying {len(photos)} photos", total=len(photos), unit="photos") as stage:
+        copies = copy_photos(photos, images_dir, on_copied=stage.advance)
         stage.detail = str(images_dir)
     return copies
+
+
+def _count_files(folder: Path) -> int | None:
+    return sum(1 for _ in folder.iterdir()) if folder.is_dir() else None
+
+
+def _write_downscaled(images_dir: Path, photos: list[Path], display: StageDisplay, threads: int | None) -> None:
+    with display.stage("writing images_2, images_4, images_8", total=len(photos), unit="photos") as stage:
+        write_downscaled(images_dir, photos, threads=threads, on_photo=stage.advance)
+        stage.detail = f"{len(photos)} photos each"
+
+
+def check_threads(threads: int | None) -> None:
+    if threads is not None and threads < 1:
+        fail(f"--threads must be at least 1, got {threads}", "leave it out to use every core, or pass e.g. 4")
 
 
 def process_sfm(cfg: ImagesCommand | VideoCommand, verbose: bool = False) -> ProcessReport:
@@ -156,6 +178,7 @@ def process_sfm(cfg: ImagesCommand | VideoCommand, verbose: bool = False) -> Pro
         fail(f"video not found: {cfg.data}", "pass --data pointing at a video file (e.g. clip.mp4)")
     if cfg.max_image_size < 0:
         fail(f"--max-image-size must be >= 0, got {cfg.max_image_size}", "use 1600 (the default), or 0 for full size")
+    check_threads(cfg.threads)
     check_output(cfg, cfg.data)
     import_pycolmap(verbose)  # a missing extra is reported before anything is written
     out = prepare_output(cfg)
@@ -170,14 +193,13 @@ def process_sfm(cfg: ImagesCommand | VideoCommand, verbose: bool = False) -> Pro
         max_image_size=cfg.max_image_size,
         ordered=isinstance(cfg, VideoCommand),
         verbose=verbose,
+        threads=cfg.threads,
     )
     outcome = run_sfm(images_dir, names, out / "colmap", options, display)
     model = read_model(outcome.model_dir)
     capture = capture_from_model(model, images_dir)
     transforms = write_transforms(capture, out / "transforms.json", ply_name="sparse_pc.ply", point_colors=model.colors)
-    with display.stage("writing images_2, images_4, images_8") as stage:
-        write_downscaled(images_dir, photos)
-        stage.detail = f"{len(photos)} photos each"
+    _write_downscaled(images_dir, photos, display, cfg.threads)
     report = ProcessReport(
         scene=out,
         transforms=transforms,
@@ -199,17 +221,15 @@ def process_llff(cfg: LLFFCommand) -> ProcessReport:
     out = prepare_output(cfg)
     display = StageDisplay(get_console())
     images_dir = out / "images"
-    with display.stage(f"copying {len(source.frames)} photos") as stage:
-        copies = copy_photos([f.image_path for f in source.frames], images_dir)
+    with display.stage(f"copying {len(source.frames)} photos", total=len(source.frames), unit="photos") as stage:
+        copies = copy_photos([f.image_path for f in source.frames], images_dir, on_copied=stage.advance)
         stage.detail = f"from {source.frames[0].image_path.parent}"
     capture = Capture(
         frames=[replace(frame, image_path=copy) for frame, copy in zip(source.frames, copies, strict=True)],
         source=source.source,
     )
     transforms = write_transforms(capture, out / "transforms.json")
-    with display.stage("writing images_2, images_4, images_8") as stage:
-        write_downscaled(images_dir, copies)
-        stage.detail = f"{len(copies)} photos each"
+    _write_downscaled(images_dir, copies, display, None)
     names = [p.name for p in copies]
     report = ProcessReport(out, transforms, len(names), names, [], None, time.perf_counter() - started)
     _print_summary(report, capture)
@@ -236,9 +256,24 @@ def _print_summary(report: ProcessReport, capture: Capture) -> None:
             f"{len(report.unregistered)} image(s) could not be registered and are left out of transforms.json: "
             f"{names}. {OVERLAP_ADVICE[0].upper()}{OVERLAP_ADVICE[1:]}."
         )
-    console.print(
-        f"train on it: fourierf-train fourierf-vm --data {report.scene} nerfstudio-data", markup=False, soft_wrap=True
-    )
+    for line in train_suggestion(report.scene, len(capture.frames)):
+        console.print(line, markup=False, soft_wrap=True)
+
+
+FEW_SHOT_VIEWS = 8
+"""The few-shot view count the closing suggestion proposes (fewer when the capture's training split is smaller)."""
+
+
+def train_suggestion(scene: Path, views: int, test_every: int = 8) -> list[str]:
+    """The closing lines: a complete few-shot training command for the scene (``nerfstudio-data`` holds out every
+    ``test_every``-th view for testing, so at most the rest are offered), and how to train on every view."""
+    training = views - math.ceil(views / test_every)
+    few = max(1, min(FEW_SHOT_VIEWS, training))
+    command = f"fourierf-train fourierf-vm --data {shlex.quote(str(scene))} nerfstudio-data --num-views {few}"
+    return [
+        f"train on {few} of its {views} views (few-shot): {command}",
+        f"  on all {training} training views: the same command without --num-views",
+    ]
 
 
 def main(args: list[str] | None = None) -> ProcessReport:

@@ -10,7 +10,13 @@ INSTALL_FIX = "install the optional extra: pip install '.[colmap]' (or: pip inst
 
 
 def import_pycolmap(verbose: bool = False) -> ModuleType:
-    """The ``pycolmap`` module, with COLMAP's own log lines off unless ``verbose`` (they would break the display)."""
+    """The ``pycolmap`` module, with COLMAP's own log lines off unless ``verbose`` (they would break the display).
+
+    ``zlib`` is loaded first: pycolmap's library carries zlib functions of its own, and once it is loaded before the
+    system zlib, every later compression in the process (PNG writing included) corrupts the heap and aborts.
+    """
+    import zlib  # noqa: F401  (load order only: see above)
+
     try:
         import pycolmap
     except ImportError as err:

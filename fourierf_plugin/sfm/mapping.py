@@ -28,16 +28,20 @@ def run_incremental_mapping(
     image_names: list[str],
     on_registered: Callable[[int], None] | None = None,
     seed: int = 0,
+    threads: int | None = None,
 ) -> MappingResult | None:
     """Map; None when no model came out (nothing could be registered).
 
     Small sets keep models down to 3 images (COLMAP's default minimum of 10 would discard a 6-photo capture);
-    ``on_registered(k)`` is called as images are registered (k new ones at a time).
+    ``on_registered(k)`` is called as images are registered (k new ones at a time); ``threads``: CPU threads of the
+    mapper and its bundle adjustments (None: all cores).
     """
     pycolmap.set_random_seed(seed)
     options = pycolmap.IncrementalPipelineOptions()
     options.min_model_size = min(options.min_model_size, max(3, len(image_names) // 2))
     options.random_seed = seed
+    if threads is not None:
+        options.num_threads = threads
     callbacks: dict[str, Callable[[], None]] = {}
     if on_registered is not None:
         callbacks = {

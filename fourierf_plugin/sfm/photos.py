@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import re
 import shutil
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -54,14 +56,16 @@ def image_size(path: Path) -> tuple[int, int]:
     return int(shape[1]), int(shape[0])
 
 
-def copy_photos(photos: list[Path], destination: Path) -> list[Path]:
-    """Copy the photos into ``destination`` under their own names; returns the copies."""
+def copy_photos(photos: list[Path], destination: Path, on_copied: Callable[[int], None] | None = None) -> list[Path]:
+    """Copy the photos into ``destination`` under their own names; returns the copies. ``on_copied(1)`` after each."""
     destination.mkdir(parents=True, exist_ok=True)
     copies = []
     for photo in photos:
         target = destination / photo.name
         shutil.copyfile(photo, target)
         copies.append(target)
+        if on_copied is not None:
+            on_copied(1)
     return copies
 
 
@@ -85,16 +89,28 @@ def downscale_photo(path: Path, target: Path, factor: int) -> None:
     iio.imwrite(target, out, **extra)
 
 
-def write_downscaled(images_dir: Path, photos: list[Path], factors: tuple[int, ...] = DOWNSCALE_FACTORS) -> list[Path]:
+def write_downscaled(
+    images_dir: Path,
+    photos: list[Path],
+    factors: tuple[int, ...] = DOWNSCALE_FACTORS,
+    threads: int | None = None,
+    on_photo: Callable[[int], None] | None = None,
+) -> list[Path]:
     """``images_<k>/`` beside ``images_dir`` for each factor k, with the same file names; returns the folders.
 
-    Factors that would shrink the smallest photo below one pixel are left out."""
+    Factors that would shrink the smallest photo below one pixel are left out. Photos are shrunk on ``threads``
+    threads (None: one), decoding and encoding release the GIL; ``on_photo(1)`` after each photo's copies."""
     smallest = min(min(image_size(photo)) for photo in photos)
-    folders = []
-    for factor in (k for k in factors if k <= smallest):
-        folder = images_dir.parent / f"{images_dir.name}_{factor}"
+    folders = [images_dir.parent / f"{images_dir.name}_{k}" for k in factors if k <= smallest]
+    for folder in folders:
         folder.mkdir(parents=True, exist_ok=True)
-        for photo in photos:
-            downscale_photo(photo, folder / photo.name, factor)
-        folders.append(folder)
+
+    def shrink(photo: Path) -> None:
+        for folder in folders:
+            downscale_photo(photo, folder / photo.name, int(folder.name.rsplit("_", 1)[1]))
+        if on_photo is not None:
+            on_photo(1)
+
+    with ThreadPoolExecutor(max_workers=max(1, threads or 1)) as pool:
+        list(pool.map(shrink, photos))  # list(): an error in any photo is raised here
     return folders

@@ -1,17 +1,24 @@
 """The structure-from-motion stages in order: features, matching, mapping; the largest model saved as
-``colmap/sparse/0`` (COLMAP's binary format), the database kept beside it for reruns and inspection."""
+``colmap/sparse/0`` (COLMAP's binary format), the database kept beside it for reruns and inspection.
+
+Progress inside a stage: extraction and matching give no callback, but COLMAP writes each photo's keypoints and each
+block of verified pairs to the database as it goes, so a watcher thread counts those rows (read-only); mapping calls
+back per registered photo.
+"""
 
 from __future__ import annotations
 
 import shutil
+import sqlite3
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from types import ModuleType
 
 from fourierf_plugin.sfm.colmap_library import import_pycolmap
 from fourierf_plugin.sfm.features import SfmCameraModel, extract_features
 from fourierf_plugin.sfm.mapping import run_incremental_mapping
-from fourierf_plugin.sfm.matching import MatchingMode, match_features, resolve_matching
+from fourierf_plugin.sfm.matching import MatchingMode, match_features, pair_count, resolve_matching
 from fourierf_plugin.sfm.photos import image_size
 from fourierf_plugin.sfm.progress import StageDisplay
 from fourierf_plugin.utils.errors import fail
@@ -31,6 +38,7 @@ class SfmOptions:
     ordered: bool = False  # frames of a video: sequential matching under "auto"
     verbose: bool = False
     seed: int = 0
+    threads: int | None = None  # CPU threads of every stage; None: all cores
 
 
 @dataclass(frozen=True)
@@ -52,6 +60,20 @@ def _database_counts(pycolmap: ModuleType, database: Path) -> tuple[int, int, in
         db.close()
 
 
+def database_rows(database: Path, table: str) -> int | None:
+    """Rows of ``table`` in COLMAP's database read while COLMAP writes it; None when it cannot be read yet."""
+    try:
+        connection = sqlite3.connect(f"file:{database}?mode=ro", uri=True, timeout=0.1)
+    except sqlite3.Error:
+        return None
+    try:
+        return int(connection.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0])
+    except sqlite3.Error:  # no such table yet, or locked for a moment
+        return None
+    finally:
+        connection.close()
+
+
 def run_sfm(
     image_dir: Path, image_names: list[str], colmap_dir: Path, options: SfmOptions, display: StageDisplay
 ) -> SfmOutcome:
@@ -63,7 +85,8 @@ def run_sfm(
     sizes = {image_size(image_dir / name) for name in image_names}
     n = len(image_names)
 
-    with display.stage(f"extracting SIFT features of {n} photos") as stage:
+    keypoint_rows = partial(database_rows, database, "keypoints")
+    with display.stage(f"extracting SIFT features of {n} photos", total=n, unit="photos", poll=keypoint_rows) as stage:
         extract_features(
             pycolmap,
             database,
@@ -72,13 +95,16 @@ def run_sfm(
             camera_model=options.camera_model,
             single_camera=len(sizes) == 1,
             max_image_size=options.max_image_size,
+            threads=options.threads,
         )
         _, keypoints, _ = _database_counts(pycolmap, database)
         stage.detail = f"{keypoints / n:.0f} per photo"
 
     method = resolve_matching(options.matching, n, options.ordered)
-    with display.stage(f"matching features ({method})") as stage:
-        match_features(pycolmap, database, method)
+    verified_rows = partial(database_rows, database, "two_view_geometries")
+    total_pairs = pair_count(method, n)
+    with display.stage(f"matching features ({method})", total=total_pairs, unit="pairs", poll=verified_rows) as stage:
+        match_features(pycolmap, database, method, threads=options.threads, n_images=n)
         pairs = _database_counts(pycolmap, database)[2]
         stage.detail = f"{pairs} verified image pairs"
     if pairs == 0:
@@ -86,9 +112,16 @@ def run_sfm(
 
     work_dir = colmap_dir / "models"
     shutil.rmtree(work_dir, ignore_errors=True)
-    with display.stage("incremental mapping", total=n) as stage:
+    with display.stage("incremental mapping", total=n, unit="photos registered") as stage:
         result = run_incremental_mapping(
-            pycolmap, database, image_dir, work_dir, image_names, on_registered=stage.advance, seed=options.seed
+            pycolmap,
+            database,
+            image_dir,
+            work_dir,
+            image_names,
+            on_registered=stage.advance,
+            seed=options.seed,
+            threads=options.threads,
         )
         if result is not None:
             stage.detail = f"{len(result.registered)} of {n} photos registered"

@@ -263,6 +263,108 @@ def test_missing_image_names_the_frame(ring: Path) -> None:
     assert "transforms.json, frame 3 (images/frame_00003.png)" in message and "not found" in message
 
 
+def test_every_missing_image_is_listed_at_once(tmp_path: Path) -> None:
+    scene = write_scene(tmp_path / "s", ring_c2w(12))
+    for i in range(1, 11):  # 10 of 12 gone: the first 8 named, the rest counted
+        (scene / "images" / f"frame_{i:05d}.png").unlink()
+    with pytest.raises(UserError) as info:
+        parse(scene)
+    problem, fix = info.value.problem, info.value.fix or ""
+    assert "transforms.json: 10 of 12 frames name images that are not found" in problem
+    assert all(f"frame {i} (images/frame_{i:05d}.png)" in problem for i in range(1, 9))
+    assert "frame 9 " not in problem and "... and 2 more" in problem
+    assert f"looked in {scene / 'images'} (2 images there)" in problem
+    assert (
+        "nerfstudio-data --skip-missing-images True" in fix and "train on the 2 frames whose images are present" in fix
+    )
+
+
+def test_skip_missing_images_trains_on_the_frames_that_are_present(tmp_path: Path, capsys) -> None:
+    meta = {"train_filenames": [f"images/frame_{i:05d}.png" for i in range(8)], "test_filenames": []}
+    meta["test_filenames"] = ["images/frame_00008.png", "images/frame_00009.png"]
+    scene = write_scene(tmp_path / "s", ring_c2w(N), meta=meta)
+    for i in (2, 5):
+        (scene / "images" / f"frame_{i:05d}.png").unlink()
+    assert "2 of 10 frames" in error_of(scene)
+    out = parse(scene, skip_missing_images=True)
+    assert out.image_names == [f"frame_{i:05d}" for i in (0, 1, 3, 4, 6, 7)]  # the listed split, less the two
+    assert len(parse(scene, "test", skip_missing_images=True).view_ids) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert "skipped 2 of 10 frames whose images are missing" in err and "training on the other 8" in err
+    assert "frame 2 (images/frame_00002.png), frame 5 (images/frame_00005.png)" in err
+    assert err.count("skipped 2 of 10") == 1  # one line however often the scene is read
+    capture = read_transforms(scene / "transforms.json", skip_missing_images=True)
+    assert len(capture.frames) == 8
+
+
+def test_skip_missing_images_is_a_flag_of_the_parser(ring: Path, tmp_path: Path) -> None:
+    args = ["fourierf-vm", "--data", str(ring), "--output-dir", str(tmp_path / "out"), "nerfstudio-data"]
+    assert train.parse_args(
+        [*args, "--skip-missing-images", "True"]
+    ).pipeline.datamanager.dataparser.skip_missing_images
+    assert not train.parse_args(args).pipeline.datamanager.dataparser.skip_missing_images
+
+
+def test_skip_missing_images_still_fails_when_no_image_is_found(ring: Path) -> None:
+    for path in (ring / "images").iterdir():
+        path.unlink()
+    message = error_of(ring, skip_missing_images=True)
+    assert "none of its 10 frames' images is found" in message and "(0 images there)" in message
+
+
+def test_instant_ngp_file_is_read_and_its_ignored_keys_named_once(tmp_path: Path, capsys) -> None:
+    """colmap2nerf's keys: the fields of view and the lens are read; the scene cube and sharpness are named."""
+    fy = FOCAL * 1.25
+    ngp = {
+        "camera_angle_x": 2 * math.atan(WIDTH / (2 * FOCAL)),
+        "camera_angle_y": 2 * math.atan(HEIGHT / (2 * fy)),
+        "aabb_scale": 16,
+        "scale": 0.33,
+        "offset": [0.5, 0.5, 0.5],
+        "is_fisheye": False,
+        "k1": 0.01,
+        "k2": -0.002,
+        "p1": 0.0,
+        "p2": 0.0,
+    }
+    frames = {i: {"sharpness": 30.0 + i} for i in range(N)}
+    scene = write_scene(tmp_path / "s", ring_c2w(N), meta=ngp, frames=frames)
+    edit_transforms(scene, lambda d: [d.pop(k) for k in ("fl_x", "fl_y")])
+    cams = parse(scene).cameras
+    assert float(cams.fx[0]) == pytest.approx(FOCAL) and float(cams.fy[0]) == pytest.approx(fy)
+    assert cams.camera_model == "OPENCV"
+    parse(scene, "test")
+    out = " ".join(capsys.readouterr().out.split())
+    assert "instant-ngp keys ignored: aabb_scale, scale, offset, sharpness (per frame)" in out
+    assert out.count("instant-ngp keys ignored") == 1
+
+
+def test_is_fisheye_means_the_fisheye_model(tmp_path: Path) -> None:
+    lens = {"is_fisheye": True, "k1": 0.05, "k2": 0.01, "k3": -0.01, "k4": 0.002}
+    cams = parse(write_scene(tmp_path / "s", ring_c2w(N), meta=lens)).cameras
+    assert cams.camera_model == "OPENCV_FISHEYE"
+    scene = write_scene(tmp_path / "t", ring_c2w(N), meta=lens | {"camera_model": "OPENCV"})
+    assert "is_fisheye is true (instant-ngp) but camera_model is 'OPENCV'" in error_of(scene)
+    scene = write_scene(tmp_path / "u", ring_c2w(N), meta={"is_fisheye": "yes"})
+    assert "is_fisheye must be true or false" in error_of(scene)
+
+
+def test_frames_repeating_a_photo_are_merged_or_named(tmp_path: Path, capsys) -> None:
+    c2w = ring_c2w(N)
+    scene = write_scene(tmp_path / "s", c2w)
+    repeats = [{"file_path": f"images/frame_{i:05d}.png", "transform_matrix": c2w[i].tolist()} for i in (3, 6)]
+    edit_transforms(scene, lambda d: d["frames"].extend(repeats))  # 12 frames for 10 photos, same cameras
+    capture = read_transforms(scene / "transforms.json")
+    assert [f.image_path.name for f in capture.frames] == [f"frame_{i:05d}.png" for i in range(N)]
+    err = " ".join(capsys.readouterr().err.split())
+    assert "2 frame(s) repeat a photo with the same camera and are used once" in err
+    assert "frames 3 and 10 (images/frame_00003.png), frames 6 and 11 (images/frame_00006.png)" in err
+    edit_transforms(scene, lambda d: d["frames"][11].update(transform_matrix=c2w[0].tolist()))
+    message = error_of(scene)
+    assert "1 photo(s) are named by two frames with different cameras: frames 6 and 11" in message
+    assert "keep one frame per photo" in message
+
+
 def test_unknown_camera_model_lists_the_supported_ones(tmp_path: Path) -> None:
     scene = write_scene(tmp_path / "s", ring_c2w(N), frames={0: {"camera_model": "EQUIRECTANGULAR"}})
     message = error_of(scene)

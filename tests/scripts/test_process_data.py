@@ -91,6 +91,39 @@ def test_images_writes_a_complete_scene(processed: Processed, photos: tuple[Path
 
 
 @needs_pycolmap
+def test_the_closing_suggestion_is_a_complete_few_shot_command(processed: Processed) -> None:
+    scene = processed.report.scene
+    out = " ".join(processed.stdout.split())
+    assert f"fourierf-train fourierf-vm --data {scene} nerfstudio-data --num-views 7" in out  # 8 views, 1 held out
+    assert "✓ extracting SIFT features of 9 photos" in out and "✓ matching features (exhaustive): " in out
+
+
+def test_train_suggestion_offers_only_views_the_training_split_has(tmp_path: Path) -> None:
+    lines = process_data.train_suggestion(tmp_path / "my scene", 3)
+    assert f"--data '{tmp_path / 'my scene'}' nerfstudio-data --num-views 2" in lines[0]  # frame 0 is a test view
+    assert "--num-views 8" in process_data.train_suggestion(tmp_path, 50)[0]
+    assert "all 43 training views" in process_data.train_suggestion(tmp_path, 50)[1]
+
+
+def test_threads_are_forwarded_to_structure_from_motion(
+    photos: tuple[Path, np.ndarray], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    seen = []
+
+    def stop_at_sfm(image_dir, names, colmap_dir, options, display):
+        seen.append(options)
+        raise UserError("stopped here")
+
+    monkeypatch.setattr(process_data, "import_pycolmap", lambda verbose=False: None)
+    monkeypatch.setattr(process_data, "run_sfm", stop_at_sfm)
+    args = ["images", "--data", str(photos[0]), "--output-dir", str(tmp_path / "out")]
+    for extra, threads in (([], None), (["--threads", "3"], 3)):
+        with pytest.raises(UserError, match="stopped here"):
+            process_data.main([*args, *extra, "--overwrite"])
+        assert seen[-1].threads == threads
+
+
+@needs_pycolmap
 def test_colmap_data_and_nerfstudio_data_read_the_output_alike(processed: Processed) -> None:
     """The same scene through its COLMAP model and through its transforms.json gives the same cameras."""
     scene = processed.report.scene
@@ -160,6 +193,12 @@ def test_fewer_than_three_photos(tmp_path: Path, capsys: pytest.CaptureFixture) 
     out = tmp_path / "out"
     _fails(["images", "--data", str(folder), "--output-dir", str(out)], capsys, "holds 2 photo(s)", "at least 3")
     assert not out.exists()  # nothing was written
+
+
+def test_threads_below_one(photos: tuple[Path, np.ndarray], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    args = ["images", "--data", str(photos[0]), "--output-dir", str(tmp_path / "out"), "--threads", "0"]
+    _fails(args, capsys, "--threads must be at least 1, got 0", "every core")
+    assert not (tmp_path / "out").exists()
 
 
 def test_missing_pycolmap_names_the_extra(

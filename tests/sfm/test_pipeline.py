@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import io
+import subprocess
+import sys
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -17,6 +19,7 @@ from fourierf_plugin.sfm.pipeline import SfmOptions, run_sfm
 from fourierf_plugin.sfm.progress import StageDisplay
 from fourierf_plugin.utils.errors import UserError
 from tests.conftest import require_module
+from tests.helpers import REPO_ROOT
 from tests.sfm.textured_scene import opengl, write_photos
 
 require_module("pycolmap", "structure-from-motion needs pycolmap (pip install '.[colmap]')")
@@ -66,3 +69,15 @@ def test_photos_that_share_nothing_are_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(UserError, match=r"(no two of the 4 photos|none of the 4 photos)") as info:
         run_sfm(folder, names, tmp_path / "colmap", SfmOptions(), _display()[0])
     assert "overlap" in info.value.fix
+
+
+def test_compression_still_works_after_pycolmap_is_imported() -> None:
+    """pycolmap carries zlib functions of its own: loaded before the system zlib, PNG writing aborts the process."""
+    code = (
+        "from fourierf_plugin.sfm.colmap_library import import_pycolmap; import_pycolmap(); "
+        "import numpy as np, imageio.v3 as iio, tempfile, os; "
+        "img = np.random.default_rng(0).integers(0, 256, (1080, 1920, 3)).astype(np.uint8); "
+        "path = os.path.join(tempfile.mkdtemp(), 'x.png'); [iio.imwrite(path, img) for _ in range(3)]; print('ok')"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO_ROOT, timeout=120)
+    assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr[-2000:]

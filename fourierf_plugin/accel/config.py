@@ -11,9 +11,11 @@ import torch
 
 @dataclass
 class AccelConfig:
-    backend: Literal["accelerated", "reference"] = "accelerated"
-    """accelerated: the fast forms of the field's operations (``fourierf_plugin.accel``); reference: the plain ones
-    (rfft filters, grid_sample lookups, autograd), slower, for reading and checking."""
+    backend: Literal["accelerated", "reference-grid-ops"] = "accelerated"
+    """The field's grid operations: accelerated, their fast forms (``fourierf_plugin.accel``); reference-grid-ops, the
+    plain ones (rfft filters, grid_sample lookups, autograd), slower, for reading and checking. Only the grid
+    operations: early stop, the GPU paths and ZeroRF's culling have their own switches (``early_stop_transmittance``
+    0, ``gpu_paths`` False, ``cull_weight_threshold`` 0)."""
     dense_train_max_vertices: int = 1 << 22
     """Training reads the density from a dense vertex table, rebuilt differentiably after every filtering, for
     grids up to this many vertices (larger grids read the factors). 0 = never."""

@@ -145,6 +145,6 @@ class AcceleratedOps(GridOps):
 
 def build_ops(config: AccelConfig, device: torch.device | str) -> GridOps:
     """The grid operations a model uses, chosen once when it is built."""
-    if config.backend == "reference":
+    if config.backend == "reference-grid-ops":
         return GridOps()
     return AcceleratedOps(config, device)

@@ -14,7 +14,7 @@ import dataclasses
 import json
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, ClassVar, Literal, TypeVar, Union, get_args, get_origin
 
@@ -22,8 +22,26 @@ from fourierf_plugin import __version__
 from fourierf_plugin.utils.errors import fail
 
 C = TypeVar("C", bound="InstantiateConfig")
-CONFIG_FORMAT = 2
-"""2: scene effects under ``pipeline.effects`` (resolved), speed settings under ``pipeline.model.accel``."""
+CONFIG_FORMAT = 3
+"""3: ZeroRF's model config of its own (``pipeline.model.zerorf``), the plain grid operations named
+``reference-grid-ops``; 2: scene effects under ``pipeline.effects`` (resolved), speed settings under
+``pipeline.model.accel``."""
+
+
+def _format_2_to_3(config: dict[str, Any]) -> dict[str, Any]:
+    """Format 2's saved data in format 3: ``field.zerorf`` (with ``enabled``) becomes ZeroRF's model config."""
+    model = config.get("pipeline", {}).get("model", {})
+    zerorf = model.get("field", {}).pop("zerorf", None)
+    if isinstance(zerorf, dict) and zerorf.pop("enabled", False):
+        model["_type"], model["zerorf"] = "ZeroRFModelConfig", zerorf
+    accel = model.get("accel", {})
+    if accel.get("backend") == "reference":
+        accel["backend"] = "reference-grid-ops"
+    return config
+
+
+UPGRADES: dict[int, Callable[[dict[str, Any]], dict[str, Any]]] = {2: _format_2_to_3}
+"""Format N's saved data in format N + 1; ``load_config`` applies them in turn up to ``CONFIG_FORMAT``."""
 
 
 @dataclasses.dataclass
@@ -195,6 +213,9 @@ def load_config(path: Path, expected: type[C] | None, registry: Registry) -> C:
     if not isinstance(payload, dict) or "config" not in payload:
         fail(f"{path} is not a fourierf config (no 'config' key)", "point at a config.json written by fourierf-train")
     fmt = payload.get("config_format")
+    config = payload["config"]
+    while isinstance(fmt, int) and not isinstance(fmt, bool) and fmt in UPGRADES and isinstance(config, dict):
+        config, fmt = UPGRADES[fmt](config), fmt + 1
     if fmt != CONFIG_FORMAT:
         fail(
             f"{path} uses config format {fmt!r} (fourierf {payload.get('fourierf_version')!r}); this is fourierf "
@@ -202,7 +223,7 @@ def load_config(path: Path, expected: type[C] | None, registry: Registry) -> C:
             "install the fourierf version that wrote it, or retrain with this version",
         )
     try:
-        return from_dict(payload["config"], expected, registry)
+        return from_dict(config, expected, registry)
     except (ValueError, TypeError, KeyError) as err:
         fail(
             f"{path} does not match this fourierf version's config: {err}",

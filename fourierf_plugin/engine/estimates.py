@@ -7,6 +7,8 @@ from typing import Any
 
 from fourierf_plugin.engine.option_checks import grid_values
 from fourierf_plugin.field_components.generator import parameter_count
+from fourierf_plugin.field_components.schedules import steps_from_fractions, voxel_counts
+from fourierf_plugin.models.zerorf import generator_config
 from fourierf_plugin.utils.console import format_duration
 
 SECONDS_PER_RAY_STEP = 1.05e-6
@@ -25,25 +27,62 @@ def estimate_seconds(config: Any, threads: int) -> float:
     side = field.n_voxels_final ** (1.0 / 3.0)
     rays = config.pipeline.datamanager.rays_per_batch + config.pipeline.model.unseen_rays()
     per_iteration = rays * side * SECONDS_PER_RAY_STEP
-    if field.zerorf.enabled:  # a cubic box's canvases: the smallest multiple of 2^levels covering the final grid
-        scale = 2**field.zerorf.upsample_levels
-        noise = field.zerorf.noise_resolution or math.ceil(side / scale)
+    zerorf = generator_config(config.pipeline.model)
+    if zerorf is not None:  # a cubic box's canvases: the smallest multiple of 2^levels covering the final grid
+        scale = 2**zerorf.upsample_levels
+        noise = zerorf.noise_resolution or math.ceil(side / scale)
         canvas = scale * noise
-        per_iteration += 3 * canvas**2 * field.zerorf.feature_channels * SECONDS_PER_GENERATED_VALUE
+        per_iteration += 3 * canvas**2 * zerorf.feature_channels * SECONDS_PER_GENERATED_VALUE
     return config.max_num_iterations * per_iteration * 2.0 / max(1, threads)
+
+
+RUN_TO_GROWTH = 0.9
+"""A run's average cost per iteration over its first iterations' cost times the grid's growth (``grid_growth``): what
+the growth leaves out (the field lights up, the occupancy updates shrink the box and filter the rays), measured on the
+bundled scene with FourieRF's CPU sizing; an estimate, which ``time_budget.MARGIN`` covers."""
+
+SAVE_BYTES_PER_SECOND = 200e6
+"""How fast a checkpoint is written (serialised and flushed to disk): an estimate for a local disk."""
+
+
+def grid_growth(config: Any) -> float:
+    """The run's mean grid side over its initial one, iteration by iteration along the upsample schedule: a ray's
+    samples, and so an iteration's cost, grow with the side."""
+    field, iterations = config.pipeline.model.field, config.max_num_iterations
+    steps = steps_from_fractions(field.upsample_fractions, iterations)
+    counts = [field.n_voxels_init, *voxel_counts(field.n_voxels_init, field.n_voxels_final, len(steps))]
+    edges = [0, *steps, iterations]
+    spans = zip(edges, edges[1:], counts, strict=False)  # one count per span; edges has one more entry
+    total = sum((end - start) * (n / field.n_voxels_init) ** (1 / 3) for start, end, n in spans)
+    return total / iterations
+
+
+def run_shape(config: Any) -> float:
+    """A run's average cost per iteration over the cost of its first iterations (what ``--time-budget`` times)."""
+    return grid_growth(config) * RUN_TO_GROWTH
+
+
+def save_seconds(size_bytes: float) -> float:
+    """The time one checkpoint of ``size_bytes`` takes to write."""
+    return size_bytes / SAVE_BYTES_PER_SECOND
 
 
 def checkpoint_bytes(config: Any, rays: int) -> float:
     """One checkpoint: the final grid's values with AdamW's two moments, the training rays' state, the rest."""
     field = config.pipeline.model.field
-    values = parameter_count(field.zerorf) if field.zerorf.enabled else grid_values(field, field.n_voxels_final)
+    zerorf = generator_config(config.pipeline.model)
+    values = parameter_count(zerorf) if zerorf is not None else grid_values(field, field.n_voxels_final)
     return values * 4 * 3 + rays * 16 + 1e6
 
 
 def describe_cost(config: Any, rays: int, threads: int, cpu: bool) -> str:
-    """The line printed before training: how long (on a CPU) and how large the run will be."""
+    """The line printed before training: how long (on a CPU, or as a time budget planned it) and how large the run
+    will be."""
     size = checkpoint_bytes(config, rays) / 2**20
     text = f"checkpoints of ~{size:.0f} MB each, the last {config.keep_checkpoints} kept"
-    if cpu:
+    planned = getattr(config, "planned_train_seconds", None)
+    if planned is not None:
+        text += f"; planned training time ~{format_duration(planned)} (--time-budget {config.time_budget})"
+    elif cpu:
         text += f"; estimated training time ~{format_duration(estimate_seconds(config, threads))} on {threads} threads"
     return text

@@ -16,6 +16,7 @@ from typing import Any
 from fourierf_plugin.field_components.generator import invalid_options
 from fourierf_plugin.field_components.schedules import steps_from_fractions
 from fourierf_plugin.fields.fourier_tensorf_field import ALL_AXES
+from fourierf_plugin.models.zerorf import generator_config
 from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.utils.memory import available_memory, check_fits
 
@@ -168,11 +169,11 @@ ZERORF_EXAMPLES = {
 
 def check_zerorf_options(config: Any) -> None:
     """A UserError for the first ZeroRF generator option it cannot be built with (only when the field uses it)."""
-    zerorf = config.pipeline.model.field.zerorf
-    if not zerorf.enabled:
+    zerorf = generator_config(config.pipeline.model)
+    if zerorf is None:
         return
     for name, needs in invalid_options(zerorf):
-        flag = flag_of(f"{_MODEL}.field.zerorf.{name}")
+        flag = flag_of(f"{_MODEL}.zerorf.{name}")
         fail(
             f"{flag} {_show(getattr(zerorf, name))} is out of range: it must be {needs}",
             f"pass e.g. {flag} {ZERORF_EXAMPLES[name]} (ZeroRF's value)",
@@ -223,7 +224,7 @@ def check_density_axes(model: Any) -> None:
     """Filtering the density along some axes only is an option of free factor grids: refuse it for ZeroRF's field,
     whose generated factors are filtered along every axis, rather than ignore it."""
     axes = model.fourier.density_axes
-    if _some_axes(axes) and model.field.zerorf.enabled:
+    if _some_axes(axes) and generator_config(model) is not None:
         flag = flag_of(f"{_MODEL}.fourier.density_axes")
         fail(
             f"{flag} {_show(axes)} applies to free factor grids; ZeroRF's generated factors are filtered along "

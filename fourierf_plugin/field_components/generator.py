@@ -56,11 +56,9 @@ PLANE_NORM_EPS = 1e-6
 
 @dataclass
 class ZeroRFConfig(InstantiateConfig):
-    """The field's factors as outputs of ZeroRF's generators, decoded by ZeroRF's decoder (``enabled``)."""
+    """The field's factors as outputs of ZeroRF's generators, decoded by ZeroRF's decoder (``models.zerorf``)."""
 
     _target: ClassVar[type | None] = None  # GeneratedVM, set below its definition
-    enabled: bool = False
-    """True: the VM factors come from generators (zerorf-vm); False: they are free parameters (TensoRF, FourieRF)."""
     noise_channels: int = 8
     """Channels of each generator's fixed noise (ZeroRF's --model-ch)."""
     feature_channels: int = 16

@@ -5,13 +5,12 @@ keeps the result; every lookup and regulariser until the next ``prepare`` reads 
 is the ``GridOps`` the field is given (``fields.grid_ops``): the reference one is the method as written; an
 accelerated one computes the same numbers faster.
 
-``FieldConfig`` describes every field of the package: with ``zerorf.enabled`` the model builds the ZeroRF field
-(``fields.zerorf_field``) from it instead.
+``FieldConfig`` gives every field of the package its grid's size and schedule; ZeroRF's generated factors are
+configured by ``field_components.generator.ZeroRFConfig`` (``models.zerorf``).
 """
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -22,7 +21,6 @@ from torch import Tensor, nn
 
 from fourierf_plugin.field_components.activations import RevivingReLU
 from fourierf_plugin.field_components.decoder import AppearanceDecoder
-from fourierf_plugin.field_components.generator import ZeroRFConfig
 from fourierf_plugin.field_components.tensor_grids import TensorCP, TensorGrid, TensorVM
 from fourierf_plugin.fields.grid_ops import FilteredFactors, GridOps
 from fourierf_plugin.fields.prepared_field import FilteredGrids, PreparedField
@@ -66,8 +64,6 @@ class FieldConfig:
     """Voxel budget after the last upsample."""
     upsample_fractions: tuple[float, ...] = (0.3, 0.7)
     """When to upsample, as fractions of the run (log-spaced voxel counts)."""
-    zerorf: ZeroRFConfig = dataclasses.field(default_factory=ZeroRFConfig)
-    """ZeroRF: the VM factors generated from fixed noise by convolutional networks, and ZeroRF's decoder (zerorf-vm)."""
 
 
 class FourierTensoRFField(PreparedField):

@@ -23,9 +23,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from fourierf_plugin.field_components.generator import GeneratedVM
+from fourierf_plugin.field_components.generator import GeneratedVM, ZeroRFConfig
 from fourierf_plugin.field_components.zerorf_decoder import ZeroRFDecoder
-from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig
 from fourierf_plugin.fields.grid_ops import FilteredFactors, GridOps
 from fourierf_plugin.fields.prepared_field import FilteredGrids, PreparedField
 
@@ -56,7 +55,7 @@ class ZeroRFField(PreparedField):
 
     def __init__(
         self,
-        config: FieldConfig,
+        config: ZeroRFConfig,
         aabb: Tensor,
         reso: Sequence[int],
         final_reso: Sequence[int],
@@ -69,9 +68,8 @@ class ZeroRFField(PreparedField):
         """``reso``: the grid at the start; ``final_reso``: the finest grid of the run (it sizes the canvas)."""
         super().__init__(aabb, ops, plane_leakage, mirror_boundary)
         self.config = config
-        zerorf = config.zerorf
-        self.grid: GeneratedVM = zerorf.setup(canvas_box=aabb, reso=reso, final_reso=final_reso, generator=generator)
-        self.decoder = ZeroRFDecoder(3 * zerorf.feature_channels, zerorf.decoder_width, view_dependent, generator)
+        self.grid: GeneratedVM = config.setup(canvas_box=aabb, reso=reso, final_reso=final_reso, generator=generator)
+        self.decoder = ZeroRFDecoder(3 * config.feature_channels, config.decoder_width, view_dependent, generator)
         self._shared_weights = SharedLayerWeights(self.decoder.base)
 
     def filter(self, f_density: float, f_color: float) -> FilteredGrids:

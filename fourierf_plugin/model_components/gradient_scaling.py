@@ -1,7 +1,5 @@
-"""'Floaters No More' gradient scaling: identity forward, gradients scaled by clamp(t², 0, 1) backward.
-
-Samples close to the camera get small gradients, so the few views cannot explain their pixels with near floaters.
-"""
+"""Gradient scaling: identity forward, gradients multiplied by a given factor backward (Floaters-No-More's
+``regularisers.floaters`` gives the factor)."""
 
 from __future__ import annotations
 
@@ -24,8 +22,3 @@ class _ScaleGradient(torch.autograd.Function):
 def scale_gradient(value: Tensor, scale: Tensor) -> Tensor:
     """``value`` unchanged, its gradient multiplied by ``scale`` (broadcast to value's shape)."""
     return _ScaleGradient.apply(value, scale.detach().expand_as(value))
-
-
-def floaters_scale(t: Tensor) -> Tensor:
-    """The Floaters-No-More factor clamp(t², 0, 1) for ray parameters ``t``."""
-    return (t * t).clamp(0.0, 1.0)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+from collections.abc import Collection
 from dataclasses import dataclass
 from typing import ClassVar, Literal
 
@@ -22,9 +23,8 @@ from fourierf_plugin.data.scene_effects import SceneEffects
 from fourierf_plugin.field_components import schedules
 from fourierf_plugin.fields.fourier_tensorf_field import ALL_AXES, FieldConfig, FourierTensoRFField
 from fourierf_plugin.fields.prepared_field import PreparedField
-from fourierf_plugin.fields.zerorf_field import ZeroRFField
-from fourierf_plugin.model_components import losses
-from fourierf_plugin.model_components.gradient_scaling import floaters_scale, scale_gradient
+from fourierf_plugin.model_components import losses, regularisers
+from fourierf_plugin.model_components.gradient_scaling import scale_gradient
 from fourierf_plugin.model_components.marching import (
     densities,
     densities_everywhere,
@@ -46,6 +46,7 @@ from fourierf_plugin.model_components.ray_sampling import (
     ndc_samples,
     ray_box_span,
 )
+from fourierf_plugin.model_components.regularisers import Regulariser, TrainingRays
 from fourierf_plugin.model_components.rendering import (
     background_color,
     blend_background,
@@ -98,20 +99,6 @@ def final_color_cutoff(fourier: FourierConfig) -> float:
     return fourier.f_final if fourier.f_final_color is None else fourier.f_final_color
 
 
-def occlusion_penalty(sigma: Tensor, fraction: float, distance_scale: float) -> Tensor:
-    """FreeNeRF's occlusion term: mean over rays and all K samples of σ_k · 1[k < M], M = round(fraction · K).
-
-    It penalises density right in front of the cameras, where few-shot training likes to paint floaters. FreeNeRF
-    composites ``1 - exp(-σ δ)``, this pipeline ``1 - exp(-distance_scale · σ δ)``: the term is on FreeNeRF's σ,
-    ``distance_scale · σ``, so its weight 0.01 means what it means there.
-    """
-    k = sigma.shape[-1]
-    if sigma.shape[0] == 0 or k == 0:
-        return sigma.sum()  # no rays: 0 with a graph, not the NaN of an empty mean
-    m = max(1, round(fraction * k))
-    return distance_scale * sigma[:, :m].sum(dim=-1).mean() / k
-
-
 @dataclass
 class Changes:
     """What ``after_step`` did, so the pipeline and trainer can follow."""
@@ -152,8 +139,8 @@ class FourieRFModel(nn.Module):
         self.occupancy_steps = schedules.steps_from_fractions(config.occupancy_update_fractions, max_iters)
         # the first step after the first occupancy update's own step (the L1's switch; the random background's start)
         self.after_first_update = self.occupancy_steps[0] + 1 if self.occupancy_steps else None
-        self.floaters_from_step = round(config.floaters_gradient_scaling_from * max_iters)
-        self._floaters_now = self.floaters_scaling_at(0)  # ``prepare`` sets it for each step
+        self.regularisers: list[Regulariser] = config.regularisers(effects, max_iters)
+        self._scaling_now = self.gradient_scalers_at(0)  # ``prepare`` sets them for each step
         self.random_background_step = self._random_background_step()
         self._background_now = self.training_background(0)  # ``prepare`` sets it for each step
         self.field = self._build_field(scene_box, effects, generator, device)
@@ -165,15 +152,11 @@ class FourieRFModel(nn.Module):
     def _build_field(
         self, scene_box: Tensor, effects: SceneEffects, generator: torch.Generator, device: torch.device | str
     ) -> PreparedField:
-        """The FourieRF/TensoRF field of free factors, or the ZeroRF field of generated ones (``field.zerorf``)."""
+        """The FourieRF/TensoRF field of free factors (``models.zerorf`` builds ZeroRF's generated ones)."""
         config, fc = self.config, self.config.field
         size = (scene_box[1] - scene_box[0]).tolist()
         reso = schedules.n_to_reso(fc.n_voxels_init, size)
         ops = build_ops(config.accel, device)
-        if fc.zerorf.enabled:
-            final = schedules.n_to_reso(max([fc.n_voxels_init, *self.voxel_targets]), size)
-            leakage, mirror = config.fourier.plane_leakage, config.fourier.boundary == "mirror"
-            return ZeroRFField(fc, scene_box, reso, final, effects.view_dependent, generator, ops, leakage, mirror)
         return FourierTensoRFField(
             fc,
             scene_box,
@@ -210,9 +193,9 @@ class FourieRFModel(nn.Module):
         ratio = self.config.tv_decay_ratio
         return 1.0 if ratio is None else schedules.tv_weight_at(step, 1.0, ratio, self.max_iters)
 
-    def floaters_scaling_at(self, step: int) -> bool:
-        """Whether Floaters-No-More scales this step's gradients (from ``floaters_gradient_scaling_from`` on)."""
-        return self.config.floaters_gradient_scaling and step >= self.floaters_from_step
+    def gradient_scalers_at(self, step: int) -> list[Regulariser]:
+        """The regularisers that scale this step's density and colour gradients (Floaters-No-More)."""
+        return [r for r in self.regularisers if r.scales_gradients_at(step)]
 
     def _random_background_step(self) -> int:
         if self.config.random_background_from is not None:
@@ -257,7 +240,7 @@ class FourieRFModel(nn.Module):
         """Filter the grids at this step's cutoffs once; call before ``forward`` (under no_grad for renders)."""
         with phase("fourier_filter"):
             self.field.prepare(*self.cutoffs(step))
-        self._floaters_now = self.floaters_scaling_at(step)
+        self._scaling_now = self.gradient_scalers_at(step)
         self._background_now = self.training_background(step)
 
     def forward(
@@ -267,13 +250,15 @@ class FourieRFModel(nn.Module):
         background: Tensor | None = None,
         jitter: torch.Generator | None = None,
         colour: bool = True,
+        terms: Collection[str] | None = None,
     ) -> dict:
         """Render rays [R, 3] (unit directions; NDC directions as made): rgb [R, 3], accumulation and depth [R].
 
-        In training mode samples are jittered (from ``jitter``, default the step generator) and the regularisers'
-        inputs are returned too; in eval mode colours are clamped and, if the accel config says so, rays stop
-        marching once they are opaque. ``colour`` False renders geometry only (rgb is the background): the
-        unseen-view terms score depth and opacity, so decoding colours there would be wasted.
+        In training mode samples are jittered (from ``jitter``, default the step generator) and each regulariser's
+        ray term is returned under its name (only those named in ``terms`` when given); in eval mode colours are
+        clamped and, if the accel config says so, rays stop marching once they are opaque. ``colour`` False renders
+        geometry only (rgb is the background): the unseen-view terms score depth and opacity, so decoding colours
+        there would be wasted.
         """
         if background is None:
             kind = self._background_now if self.training else self.effects.eval_background
@@ -282,7 +267,7 @@ class FourieRFModel(nn.Module):
             samples = self.sample(origins, directions, jitter)
         with phase("density"):
             sigma = self.march(samples)
-        scale = floaters_scale(samples.t) if self.training and self._floaters_now else None
+        scale = self._gradient_scale(samples.t) if self.training else None
         if scale is not None:
             sigma = scale_gradient(sigma, scale)
         with phase("compositing"):
@@ -300,14 +285,24 @@ class FourieRFModel(nn.Module):
                 rgb = rgb.clamp(0.0, 1.0)
             depth = expected_depth(weights, samples.t, torch.full_like(acc, self.far))
         out = {"rgb": rgb, "accumulation": acc, "depth": depth, "background": background}
-        if self.training and self.config.distortion_weight > 0:
-            out |= {"weights": weights, "t": samples.t}  # for loss_dict's distortion term: unseen patches skip it
-        if self.training and self.effects.occlusion_regularization:
-            out["occlusion"] = occlusion_penalty(sigma, self.config.occlusion_fraction, self.config.distance_scale)
-        if self.training and self.config.entropy_weight > 0:
-            alpha = opacity_from_density(sigma, samples.deltas, self.config.distance_scale)
-            out["entropy"] = losses.ray_entropy(alpha, acc, self.config.entropy_threshold)
+        if self.training:
+            rays = TrainingRays(
+                sigma, samples.t, samples.deltas, weights, acc, self.near, self.far, self.config.distance_scale
+            )
+            for regulariser in self.regularisers:
+                if terms is None or regulariser.name in terms:
+                    term = regulariser.ray_term(rays)
+                    if term is not None:
+                        out[regulariser.name] = term
         return out
+
+    def _gradient_scale(self, t: Tensor) -> Tensor | None:
+        """The product of this step's gradient scales at ray parameters ``t`` [R, N]; None where none acts."""
+        scale = None
+        for regulariser in self._scaling_now:
+            factor = regulariser.gradient_scale(t)
+            scale = factor if scale is None else scale * factor
+        return scale
 
     def sample(self, origins: Tensor, directions: Tensor, jitter: torch.Generator | None = None) -> RaySamples:
         """Fixed steps through the box (euclidean rays), even steps along NDC rays, or fixed steps of the contracted
@@ -342,22 +337,19 @@ class FourieRFModel(nn.Module):
             accel.early_stop_segment,
         )
 
-    def unseen_depth_smoothness(
-        self, origins: Tensor, directions: Tensor, size: int, jitter: torch.Generator | None = None
-    ) -> Tensor:
-        """RegNeRF's depth smoothness, weighted, on patches [P * size², 3] of rays from unseen poses: density that
-        paints each photo from just in front of its camera leaves the depth torn between the views. ``jitter``: where
-        the samples' jitter comes from (the pipeline keeps these draws off the training batches' stream)."""
-        background = torch.zeros(3, device=origins.device)  # colour is not scored here: draw no coin for it
-        depth = self.forward(origins, directions, background, jitter, colour=False)["depth"]
-        return self.config.depth_smoothness_weight * losses.depth_smoothness(depth.view(-1, size, size))
+    def unseen_views(self) -> list[Regulariser]:
+        """The regularisers that render rays from unseen poses each step, in the order their terms are taken."""
+        return [r for r in self.regularisers if r.unseen is not None]
 
-    def unseen_entropy(self, origins: Tensor, directions: Tensor, jitter: torch.Generator | None = None) -> Tensor:
-        """InfoNeRF's ray entropy, weighted, on rays [R, 3] from unseen poses: no photo charges the fog seen only
-        from between the cameras, this term does. ``jitter`` as for ``unseen_depth_smoothness``."""
+    def unseen_loss(
+        self, regulariser: Regulariser, origins: Tensor, directions: Tensor, jitter: torch.Generator | None = None
+    ) -> Tensor:
+        """``regulariser``'s weighted term on its rays [R, 3] from unseen poses, rendered as geometry only (no colour
+        is scored there: no coin is drawn for a background). ``jitter``: where the samples' jitter comes from (the
+        pipeline keeps these draws off the training batches' stream)."""
         background = torch.zeros(3, device=origins.device)
-        entropy = self.forward(origins, directions, background, jitter, colour=False)["entropy"]
-        return self.config.entropy_weight * entropy
+        outputs = self.forward(origins, directions, background, jitter, colour=False, terms=(regulariser.name,))
+        return regulariser.unseen_loss(outputs)
 
     def loss_dict(self, outputs: dict, target_rgba: Tensor, step: int) -> dict[str, Tensor]:
         """Photometric MSE plus the regularisers, all on this iteration's filtered grids."""
@@ -376,13 +368,10 @@ class FourieRFModel(nn.Module):
         l1 = self.l1_weight(step)
         if l1 > 0:
             out["l1_density"] = l1 * losses.density_l1(g.density.planes, g.density.lines)
-        if "occlusion" in outputs and c.occlusion_weight > 0:
-            out["occlusion"] = c.occlusion_weight * outputs["occlusion"]
-        if c.distortion_weight > 0 and "weights" in outputs:
-            s = (outputs["t"] - self.near) / (self.far - self.near)
-            out["distortion"] = c.distortion_weight * losses.distortion(outputs["weights"], s)
-        if c.entropy_weight > 0 and "entropy" in outputs:
-            out["entropy"] = c.entropy_weight * outputs["entropy"]
+        for regulariser in self.regularisers:
+            term = regulariser.loss(outputs)
+            if term is not None:
+                out[regulariser.name] = term
         return out
 
     @torch.no_grad()
@@ -511,7 +500,8 @@ class FourieRFModel(nn.Module):
 
 @dataclass
 class FourieRFModelConfig(InstantiateConfig):
-    """Sampler, field, renderer and losses of FourieRF (and of TensoRF with ``fourier.enabled False``)."""
+    """Sampler, field, renderer and losses of FourieRF (and of TensoRF with ``fourier.enabled False``); ZeroRF's is
+    ``models.zerorf.ZeroRFModelConfig``."""
 
     _target: ClassVar[type] = FourieRFModel
     field: FieldConfig = dataclasses.field(default_factory=FieldConfig)
@@ -581,9 +571,12 @@ class FourieRFModelConfig(InstantiateConfig):
     """Training on a CPU: σ is read without gradients first, then with them only where the compositing weight exceeds
     this; other samples count as empty (ZeroRF's occlusion culling: 1e-4). 0 = off."""
 
+    def regularisers(self, effects: SceneEffects, max_iters: int) -> list[Regulariser]:
+        """The few-shot regularisers these options turn on for a scene with ``effects`` (``model_components.
+        regularisers``: one module each), in the order their terms are taken."""
+        return regularisers.build(self, effects, max_iters)
+
     def unseen_rays(self) -> int:
-        """Rays an iteration renders from unseen poses: depth smoothness's patches and the entropy's rays (none when
-        both are off)."""
-        patches = self.depth_smoothness_patches * self.depth_smoothness_patch_size**2
-        patches = patches if self.depth_smoothness_weight > 0 else 0
-        return patches + (self.entropy_unseen_rays if self.entropy_weight > 0 else 0)
+        """Rays an iteration renders from unseen poses (depth smoothness's patches, the entropy's rays)."""
+        built = self.regularisers(SceneEffects(), 1)
+        return sum(r.unseen.rays for r in built if r.unseen is not None)

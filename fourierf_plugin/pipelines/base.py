@@ -69,8 +69,8 @@ class Pipeline:
             step_generator=self.step_generator,
         ).to(device)
         self._generator = generator
-        # Unseen-view rays draw from a stream of their own: turning depth smoothness or the entropy on changes the
-        # loss, not the training batches or their jitter.
+        # Unseen-view rays draw from a stream of their own: turning an unseen-view regulariser on changes the loss,
+        # not the training batches or their jitter.
         self.unseen_generator = torch.Generator(device=self.step_generator.device).manual_seed(
             generator.initial_seed() + 2
         )
@@ -84,22 +84,13 @@ class Pipeline:
         outputs = self.model(batch.origins, batch.directions)
         with phase("losses"):
             loss_terms = self.model.loss_dict(outputs, batch.rgba, step)
-        config = self.model.config
-        if config.depth_smoothness_weight > 0:
-            size = config.depth_smoothness_patch_size
+        for regulariser in self.model.unseen_views():
+            views = regulariser.unseen
             with phase("data"):
-                origins, directions = self.datamanager.unseen_patches(
-                    config.depth_smoothness_patches, size, self.unseen_generator
-                )
-            loss_terms["depth_smoothness"] = self.model.unseen_depth_smoothness(
-                origins, directions, size, self.unseen_generator
+                origins, directions = self.datamanager.unseen_patches(views.patches, views.size, self.unseen_generator)
+            loss_terms[regulariser.unseen_name] = self.model.unseen_loss(
+                regulariser, origins, directions, self.unseen_generator
             )
-        if config.entropy_weight > 0 and config.entropy_unseen_rays > 0:
-            with phase("data"):  # single-pixel patches: each ray from a pose of its own
-                origins, directions = self.datamanager.unseen_patches(
-                    config.entropy_unseen_rays, 1, self.unseen_generator
-                )
-            loss_terms["entropy_unseen"] = self.model.unseen_entropy(origins, directions, self.unseen_generator)
         with phase("losses"):
             loss = torch.stack(list(loss_terms.values())).sum()
         metrics = {k: v.detach() for k, v in loss_terms.items()}

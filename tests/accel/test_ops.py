@@ -7,7 +7,7 @@ view dependence, whether the dense vertex tables are built or not. The budgets (
 filtering, reused by every view of a render until a parameter or cutoff changes); row-major factor copies are made
 in renders only; bfloat16 is used where ``decoder_precision`` and the device say so, never for float64, and stays
 within bf16 precision of float32; colour of large training batches in checkpointed chunks changes nothing.
-``build_ops`` gives the reference for backend "reference".
+``build_ops`` gives the reference for backend "reference-grid-ops".
 """
 
 from __future__ import annotations
@@ -315,10 +315,10 @@ def test_few_shaded_samples_are_not_checkpointed() -> None:
 
 # --------------------------------------------------------------------------------------------------- build_ops
 def test_build_ops_picks_the_backend() -> None:
-    assert type(build_ops(AccelConfig(backend="reference"), "cpu")) is GridOps
+    assert type(build_ops(AccelConfig(backend="reference-grid-ops"), "cpu")) is GridOps
     accelerated = build_ops(AccelConfig(), "cpu")
     assert isinstance(accelerated, AcceleratedOps) and accelerated.name == "accelerated"
-    reference_model = slab_model(0.05, accel=AccelConfig(backend="reference"))
+    reference_model = slab_model(0.05, accel=AccelConfig(backend="reference-grid-ops"))
     assert type(reference_model.field.ops) is GridOps
     assert isinstance(slab_model(0.05).field.ops, AcceleratedOps)
 

@@ -41,7 +41,7 @@ def _overridden() -> TrainerConfig:
             "--pipeline.effects.view-dependent",
             "True",
             "--pipeline.model.accel.backend",
-            "reference",
+            "reference-grid-ops",
             "--pipeline.model.occupancy-update-fractions",
             "0.25",
             "0.5",
@@ -82,7 +82,7 @@ def test_overridden_fields_survive_a_json_round_trip() -> None:
     assert again.optimizer.betas == (0.8, 0.9)
     assert again.pipeline.effects.background == "black"
     assert again.pipeline.effects.ray_space is None, "an effect left as declared stays None"
-    assert again.pipeline.model.accel.backend == "reference"
+    assert again.pipeline.model.accel.backend == "reference-grid-ops"
 
 
 def test_save_and_load_config_round_trip(tmp_path: Path) -> None:

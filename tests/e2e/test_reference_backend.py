@@ -1,5 +1,6 @@
-"""The reference backend end to end: ``--pipeline.model.accel.backend reference`` trains the bundled scene through the
-plain operations (rfft filters, grid_sample lookups, autograd) and ends where the accelerated path ends.
+"""The reference grid operations end to end: ``--pipeline.model.accel.backend reference-grid-ops`` trains the bundled
+scene through the plain operations (rfft filters, grid_sample lookups, autograd) and ends where the accelerated path
+ends.
 
 Both runs are built by the real CLI parser from the same tiny arguments, the reference one with the backend flag
 added. 60 iterations cross two occupancy updates (a low threshold, so they mark cells and the second one shrinks the
@@ -44,9 +45,9 @@ SHARED_FLAGS = [
     # the band open at 20 % (the budget rule's grid lr 0.04 and longer ramp leave the tiny scene's box uncropped).
     "--budget-rule", "False", "--optimizer.weight-decay", "0", "--optimizer.lr-decay-ratio", "1.0",
 ]  # fmt: skip
-REFERENCE_FLAGS = ["--pipeline.model.accel.backend", "reference"]
+REFERENCE_FLAGS = ["--pipeline.model.accel.backend", "reference-grid-ops"]
 PARSER_FLAGS = ["blender-data", "--test-every", "4"]  # 2 of the 8 test views: the reference renders are the slow part
-BACKENDS = ("accelerated", "reference")
+BACKENDS = ("accelerated", "reference-grid-ops")
 
 LOSS_RTOL = 1e-5
 NETWORK_ATOL = 3e-5  # basis and decoder (lr 1e-3; seen: 5e-6)
@@ -68,7 +69,7 @@ class Trained:
 def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Trained]:
     trained = {}
     for backend in BACKENDS:
-        extra = [*SHARED_FLAGS, *(REFERENCE_FLAGS if backend == "reference" else []), *PARSER_FLAGS]
+        extra = [*SHARED_FLAGS, *(REFERENCE_FLAGS if backend == "reference-grid-ops" else []), *PARSER_FLAGS]
         trainer, run_dir = train_tiny(tmp_path_factory.mktemp(backend), iters=ITERS, extra=extra)
         records = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
         _, state = load_latest_checkpoint(run_dir / "checkpoints")
@@ -78,7 +79,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Trained]:
 
 
 def test_the_flag_selects_the_reference_ops_and_lands_in_config_json(runs: dict[str, Trained]) -> None:
-    assert type(runs["reference"].trainer.pipeline.model.field.ops) is GridOps
+    assert type(runs["reference-grid-ops"].trainer.pipeline.model.field.ops) is GridOps
     assert isinstance(runs["accelerated"].trainer.pipeline.model.field.ops, AcceleratedOps)
     for backend, run in runs.items():
         saved = json.loads((run.run_dir / "config.json").read_text())["config"]
@@ -100,15 +101,15 @@ def test_both_runs_crossed_the_same_occupancy_updates_and_upsamples(runs: dict[s
 
 def test_every_logged_loss_matches(runs: dict[str, Trained]) -> None:
     logged = {b: [r for r in runs[b].records if "loss" in r] for b in BACKENDS}
-    assert [r["step"] for r in logged["reference"]] == list(range(LOG_EVERY, ITERS + 1, LOG_EVERY))
-    assert [r["step"] for r in logged["accelerated"]] == [r["step"] for r in logged["reference"]]
-    for ours, theirs in zip(logged["reference"], logged["accelerated"], strict=True):
+    assert [r["step"] for r in logged["reference-grid-ops"]] == list(range(LOG_EVERY, ITERS + 1, LOG_EVERY))
+    assert [r["step"] for r in logged["accelerated"]] == [r["step"] for r in logged["reference-grid-ops"]]
+    for ours, theirs in zip(logged["reference-grid-ops"], logged["accelerated"], strict=True):
         for key in ("loss", "psnr", "rays"):
             assert ours[key] == pytest.approx(theirs[key], rel=LOSS_RTOL), (ours["step"], key)
 
 
 def test_final_parameters_match(runs: dict[str, Trained]) -> None:
-    ours, theirs = runs["reference"].state, runs["accelerated"].state
+    ours, theirs = runs["reference-grid-ops"].state, runs["accelerated"].state
     assert ours.keys() == theirs.keys()
     for name, value in ours.items():
         other = theirs[name]
@@ -127,10 +128,10 @@ def test_reloaded_runs_score_the_same_on_the_test_split(runs: dict[str, Trained]
     reports = {}
     for backend, run in runs.items():
         loaded = load_run(run.run_dir / "config.json", config_registry(), device="cpu")
-        expected = GridOps if backend == "reference" else AcceleratedOps
+        expected = GridOps if backend == "reference-grid-ops" else AcceleratedOps
         assert type(loaded.pipeline.model.field.ops) is expected, "config.json rebuilds the run's backend"
         reports[backend] = evaluate(loaded, "test")
-    ours, theirs = reports["reference"], reports["accelerated"]
+    ours, theirs = reports["reference-grid-ops"], reports["accelerated"]
     assert ours["view_ids"] == theirs["view_ids"] == [0, 4]
     assert ours["results"]["psnr"] == pytest.approx(theirs["results"]["psnr"], abs=PSNR_ATOL)
     for a, b in zip(ours["per_image"], theirs["per_image"], strict=True):

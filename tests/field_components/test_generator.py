@@ -20,9 +20,7 @@ from fourierf_plugin.field_components.tensor_grids import MAT_MODES, VEC_MODES
 from fourierf_plugin.field_components.zerorf_decoder import ZeroRFDecoder, trunc_exp
 from fourierf_plugin.model_components.occupancy import shrink_bounds
 
-SMALL = ZeroRFConfig(
-    enabled=True, noise_channels=4, feature_channels=3, plane_channels=(64, 32, 32), line_channels=(16, 16, 16)
-)
+SMALL = ZeroRFConfig(noise_channels=4, feature_channels=3, plane_channels=(64, 32, 32), line_channels=(16, 16, 16))
 """Narrow generators (two ×2 upsamples): the same code paths as ZeroRF's widths, in milliseconds."""
 FLAT = ZeroRFConfig(attention=False, noise_channels=3, feature_channels=5, plane_channels=(64,), line_channels=(8, 32))
 """No upsample level and no attention: the canvas is the noise."""
@@ -137,7 +135,7 @@ def test_the_same_seed_gives_the_same_generators_and_another_seed_does_not() -> 
 
 
 def test_zerorf_initialisation_zeroes_every_residual_branch_end_and_the_attention_output() -> None:
-    grid = _grid(ZeroRFConfig(enabled=True, plane_channels=(64, 32), line_channels=(16, 16)))
+    grid = _grid(ZeroRFConfig(plane_channels=(64, 32), line_channels=(16, 16)))
     zeroed = [p for name, p in grid.named_parameters() if ".conv2." in name or ".out." in name]
     assert zeroed and all(float(p.detach().abs().max()) == 0.0 for p in zeroed)
     convs = [p for name, p in grid.named_parameters() if name.endswith("conv1.weight")]
@@ -147,7 +145,7 @@ def test_zerorf_initialisation_zeroes_every_residual_branch_end_and_the_attentio
 def test_gradients_reach_every_generator_parameter() -> None:
     """At initialisation the zeroed residual ends block the branches behind them (ZeroRF's identity start); after a
     step every weight of every generator, the attention included, receives a gradient."""
-    grid = _grid(ZeroRFConfig(enabled=True, noise_channels=4, feature_channels=3, plane_channels=(64, 32),
+    grid = _grid(ZeroRFConfig(noise_channels=4, feature_channels=3, plane_channels=(64, 32),
                               line_channels=(16, 16)))  # fmt: skip
     optimizer = torch.optim.Adam(grid.parameters(), lr=1e-2)
     target = torch.Generator().manual_seed(9)
@@ -191,7 +189,7 @@ def test_fitting_the_factors_lowers_the_loss() -> None:
     ],
 )
 def test_bad_options_are_named(changes: dict, option: str) -> None:
-    config = ZeroRFConfig(enabled=True, **changes)
+    config = ZeroRFConfig(**changes)
     assert [name for name, _ in invalid_options(config)] == [option]
     with pytest.raises(ValueError, match=option):
         GeneratedVM(config, BOX, [8, 8, 8], [16, 16, 16], torch.Generator().manual_seed(0))

@@ -1,4 +1,4 @@
-"""The reference photometric, grid- and ray-regulariser losses, with TensoRF's normalisations (spec 3.6).
+"""The reference photometric and grid losses, with TensoRF's normalisations (spec 3.6).
 
 Closed forms on ramps and constants, the spec's formula on random planes, 1-wide axes and empty batches. The TV's
 faster sum of squared differences (``accel.tv``) is compared with these in ``tests/accel/test_tv.py``.
@@ -11,11 +11,8 @@ import torch
 
 from fourierf_plugin.model_components.losses import (
     density_l1,
-    depth_smoothness,
-    distortion,
     grid_tv,
     mse,
-    ray_entropy,
     total_variation_1d,
     total_variation_2d,
 )
@@ -110,98 +107,3 @@ def test_mse_of_an_empty_batch_is_zero_not_nan() -> None:
     value = mse(pred, torch.zeros(0, 3))
     assert float(value.detach()) == 0.0
     value.backward()
-
-
-@pytest.mark.parametrize(("a", "b"), [(0.3, -0.2), (1.0, 0.0), (0.0, 2.5)])
-def test_depth_smoothness_of_a_tilted_plane(a: float, b: float) -> None:
-    """Patches of a planar depth a·row + b·col: every vertical difference is a, every horizontal one b."""
-    patches = _ramp_plane(5, 8, 8, a, b)
-    assert float(depth_smoothness(patches)) == pytest.approx(a * a + b * b, rel=1e-12, abs=1e-15)
-
-
-def test_depth_smoothness_of_constant_and_of_no_patches_is_zero() -> None:
-    assert float(depth_smoothness(torch.full((3, 4, 4), 0.6))) == 0.0
-    empty = torch.zeros(0, 8, 8, requires_grad=True)
-    value = depth_smoothness(empty)
-    value.backward()
-    assert float(value.detach()) == 0.0 and empty.grad is not None
-
-
-def test_depth_smoothness_penalises_a_step_by_its_height() -> None:
-    """One 8×8 patch with a step of height h between columns 3 and 4: one horizontal jump per row of 7 differences."""
-    patch = torch.zeros(1, 8, 8, dtype=torch.float64)
-    patch[:, :, 4:] = 0.5
-    assert float(depth_smoothness(patch)) == pytest.approx(0.25 / 7)
-
-
-def _distortion_by_pairs(weights: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
-    """mip-NeRF 360's definition term by term, O(N²): every pair of intervals, then each interval with itself."""
-    lengths = torch.cat([s.diff(dim=-1), torch.zeros_like(s[..., :1])], dim=-1)
-    mids = s + 0.5 * lengths
-    pairs = (weights[:, :, None] * weights[:, None, :] * (mids[:, :, None] - mids[:, None, :]).abs()).sum(dim=(1, 2))
-    return (pairs + (weights.square() * lengths).sum(dim=-1) / 3.0).mean()
-
-
-def test_distortion_matches_its_pairwise_definition() -> None:
-    generator = torch.Generator().manual_seed(3)
-    s = torch.rand(6, 40, generator=generator, dtype=torch.float64).sort(dim=-1).values
-    weights = torch.rand(6, 40, generator=generator, dtype=torch.float64)
-    weights = weights / weights.sum(dim=-1, keepdim=True) * torch.rand(6, 1, generator=generator, dtype=torch.float64)
-    assert float(distortion(weights, s)) == pytest.approx(float(_distortion_by_pairs(weights, s)), rel=1e-12)
-
-
-def test_distortion_of_one_interval_is_its_own_term_and_of_two_surfaces_their_distance() -> None:
-    """All weight in one interval of length d: w² d / 3. Half at each of two intervals D apart (d → 0): D / 2."""
-    s = torch.linspace(0.0, 1.0, 11, dtype=torch.float64)[None]
-    one = torch.zeros(1, 11, dtype=torch.float64)
-    one[0, 4] = 0.8
-    assert float(distortion(one, s)) == pytest.approx(0.64 * 0.1 / 3.0, rel=1e-12)
-    two = torch.zeros(1, 11, dtype=torch.float64)
-    two[0, 1] = two[0, 7] = 0.5
-    assert float(distortion(two, s)) == pytest.approx(2 * 0.25 * 0.6 + 2 * 0.25 * 0.1 / 3.0, rel=1e-12)
-    assert float(distortion(two, s)) > float(distortion(one, s))  # doubled geometry costs more than one surface
-
-
-def test_distortion_of_no_rays_is_zero_and_its_gradient_finite() -> None:
-    empty = torch.zeros(0, 8, requires_grad=True)
-    value = distortion(empty, torch.zeros(0, 8))
-    value.backward()
-    assert float(value.detach()) == 0.0 and empty.grad is not None
-    weights = torch.full((4, 16), 1.0 / 16, requires_grad=True)
-    distortion(weights, torch.linspace(0.0, 1.0, 16).expand(4, 16)).backward()
-    assert weights.grad is not None and bool(torch.isfinite(weights.grad).all())
-
-
-def test_ray_entropy_is_zero_for_one_opaque_sample_and_log2_n_for_an_even_ray() -> None:
-    """Opacity in one sample: 0 bits; even over N samples: log2 N bits (α scaled alike: only the shape counts)."""
-    alpha = torch.zeros(2, 16, dtype=torch.float64)
-    alpha[0, 5] = 0.9
-    alpha[1] = 0.2
-    acc = torch.ones(2, dtype=torch.float64)
-    assert float(ray_entropy(alpha[:1], acc[:1], 0.1)) == pytest.approx(0.0, abs=1e-8)
-    assert float(ray_entropy(alpha[1:], acc[1:], 0.1)) == pytest.approx(4.0, rel=1e-8)
-    assert float(ray_entropy(alpha, acc, 0.1)) == pytest.approx(2.0, rel=1e-8)  # a mean over both rays
-
-
-def test_ray_entropy_leaves_out_rays_that_hit_nothing_and_divides_by_all() -> None:
-    alpha = torch.full((4, 8), 0.01, dtype=torch.float64)
-    acc = torch.tensor([0.5, 0.05, 0.1, 0.9], dtype=torch.float64)  # at the threshold counts as a miss
-    assert float(ray_entropy(alpha, acc, 0.1)) == pytest.approx(2 * 3.0 / 4, rel=1e-8)
-
-
-def test_ray_entropy_gradients_stay_finite_on_hard_rays() -> None:
-    """Empty rays, one-hot rays, rays with a single zero-opacity sample beside opaque ones and no rays at all."""
-    alpha = torch.zeros(4, 32)
-    alpha[1, 3] = 1.0
-    alpha[2, :31] = 1.0
-    alpha[3] = torch.linspace(0.0, 1.0, 32)
-    alpha.requires_grad_(True)
-    acc = torch.tensor([0.0, 1.0, 1.0, 1.0])
-    value = ray_entropy(alpha, acc, 0.1)
-    value.backward()
-    assert torch.isfinite(value) and alpha.grad is not None and bool(torch.isfinite(alpha.grad).all())
-    assert bool((alpha.grad[0] == 0).all())  # a miss has no gradient
-    empty = torch.zeros(0, 8, requires_grad=True)
-    nothing = ray_entropy(empty, torch.zeros(0), 0.1)
-    nothing.backward()
-    assert float(nothing.detach()) == 0.0 and empty.grad is not None

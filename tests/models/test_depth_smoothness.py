@@ -12,6 +12,8 @@ from pathlib import Path
 import pytest
 import torch
 
+from fourierf_plugin.model_components.regularisers import DepthSmoothness, Regulariser
+from fourierf_plugin.models.fourierf import FourieRFModel
 from fourierf_plugin.utils.errors import UserError
 from tests.helpers import TINY_SCENE
 from tests.models.test_scene_effects import (
@@ -22,6 +24,12 @@ from tests.models.test_scene_effects import (
 )
 
 ON = ("--pipeline.model.depth-smoothness-weight", "0.1", "--pipeline.model.depth-smoothness-patch-size", "4")
+
+
+def smoothness(model: FourieRFModel) -> Regulariser:
+    """The model's DepthSmoothness regulariser."""
+    (found,) = [r for r in model.regularisers if isinstance(r, DepthSmoothness)]
+    return found
 
 
 def test_off_by_default_renders_no_patches(llff_scene: Path, tmp_path: Path, monkeypatch) -> None:
@@ -41,7 +49,7 @@ def test_the_term_is_finite_and_reaches_the_density_grids(llff_scene: Path, tmp_
     model = pipeline.model
     origins, directions = pipeline.datamanager.unseen_patches(3, 4, pipeline.unseen_generator)
     model.prepare(0)
-    term = model.unseen_depth_smoothness(origins, directions, 4)
+    term = model.unseen_loss(smoothness(model), origins, directions)
     assert term.ndim == 0 and torch.isfinite(term) and float(term.detach()) >= 0.0
     term.backward()
     assert_gradients_reach_the_density_grids(model)
@@ -101,4 +109,4 @@ def test_the_patches_decode_no_colour(llff_scene: Path, tmp_path: Path, monkeypa
     origins, directions = pipeline.datamanager.unseen_patches(3, 4, pipeline.unseen_generator)
     model.prepare(0)
     monkeypatch.setattr(model.field, "rgb", lambda *a, **k: pytest.fail("colour decoded for an unseen patch"))
-    assert torch.isfinite(model.unseen_depth_smoothness(origins, directions, 4))
+    assert torch.isfinite(model.unseen_loss(smoothness(model), origins, directions))

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import torch
 
-from fourierf_plugin.model_components import losses
+from fourierf_plugin.model_components.regularisers import distortion as losses
 from tests.helpers import TINY_SCENE
 from tests.models.test_scene_effects import (
     assert_gradients_reach_the_density_grids,
@@ -25,7 +25,7 @@ ON = ("--pipeline.model.distortion-weight", "0.01")
 def test_off_by_default_is_never_computed(tmp_path: Path, monkeypatch) -> None:
     pipeline = pipeline_for(TINY_SCENE, tmp_path)
     assert pipeline.model.config.distortion_weight == 0.0
-    forbid(monkeypatch, "fourierf_plugin.model_components.losses", "distortion")
+    forbid(monkeypatch, "fourierf_plugin.model_components.regularisers.distortion", "distortion")
     loss, metrics = pipeline.train_step(0)
     assert "distortion" not in metrics and torch.isfinite(loss)
 

@@ -13,6 +13,8 @@ from pathlib import Path
 import pytest
 import torch
 
+from fourierf_plugin.model_components.regularisers import Entropy, Regulariser
+from fourierf_plugin.models.fourierf import FourieRFModel
 from tests.helpers import TINY_SCENE
 from tests.models.test_scene_effects import (
     assert_gradients_reach_the_density_grids,
@@ -25,10 +27,16 @@ from tests.models.test_scene_effects import (
 ON = ("--pipeline.model.entropy-weight", "0.001", "--pipeline.model.entropy-unseen-rays", "64")
 
 
+def entropy(model: FourieRFModel) -> Regulariser:
+    """The model's Entropy regulariser."""
+    (found,) = [r for r in model.regularisers if isinstance(r, Entropy)]
+    return found
+
+
 def test_off_by_default_is_never_computed(tmp_path: Path, monkeypatch) -> None:
     pipeline = pipeline_for(TINY_SCENE, tmp_path)
     assert pipeline.model.config.entropy_weight == 0.0 and pipeline.model.config.unseen_rays() == 0
-    forbid(monkeypatch, "fourierf_plugin.model_components.losses", "ray_entropy")
+    forbid(monkeypatch, "fourierf_plugin.model_components.regularisers.entropy", "ray_entropy")
     monkeypatch.setattr(pipeline.datamanager, "unseen_patches", lambda *a, **k: pytest.fail("no unseen rays"))
     _, metrics = pipeline.train_step(0)
     assert "entropy" not in metrics and "entropy_unseen" not in metrics
@@ -49,7 +57,7 @@ def test_both_terms_are_finite_parts_of_the_loss_that_reach_the_density_grids(
             p.add_(0.5)
     origins, directions = pipeline.datamanager.unseen_patches(16, 1, pipeline.unseen_generator)
     model.prepare(3)
-    term = model.unseen_entropy(origins, directions)
+    term = model.unseen_loss(entropy(model), origins, directions)
     assert float(term.detach()) > 0
     term.backward()
     assert_gradients_reach_the_density_grids(model)
@@ -76,4 +84,4 @@ def test_the_unseen_rays_decode_no_colour(tmp_path: Path, monkeypatch) -> None:
     origins, directions = pipeline.datamanager.unseen_patches(16, 1, pipeline.unseen_generator)
     model.prepare(0)
     monkeypatch.setattr(model.field, "rgb", lambda *a, **k: pytest.fail("colour decoded for an unseen ray"))
-    assert torch.isfinite(model.unseen_entropy(origins, directions))
+    assert torch.isfinite(model.unseen_loss(entropy(model), origins, directions))

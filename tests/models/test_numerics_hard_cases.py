@@ -23,8 +23,9 @@ from fourierf_plugin.field_components.fourier import filter_lines, filter_planes
 from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig
 from fourierf_plugin.model_components import losses
 from fourierf_plugin.model_components.occupancy import vertex_grid
+from fourierf_plugin.model_components.regularisers.occlusion import occlusion_penalty
 from fourierf_plugin.model_components.rendering import composite_weights
-from fourierf_plugin.models.fourierf import FourieRFModel, FourieRFModelConfig, occlusion_penalty
+from fourierf_plugin.models.fourierf import FourieRFModel, FourieRFModelConfig
 from tests.helpers import BLENDER, ndc_model
 
 BOUND, NEAR, FAR = 1.5, 2.0, 6.0  # the Blender box half-size and ray bounds

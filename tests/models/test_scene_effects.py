@@ -20,14 +20,18 @@ from fourierf_plugin.engine.optimizers import build_optimizer
 from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig
 from fourierf_plugin.method_configs import all_methods
 from fourierf_plugin.method_configs.scene_presets import apply_real_scene_preset
-from fourierf_plugin.model_components.gradient_scaling import floaters_scale, scale_gradient
+from fourierf_plugin.model_components.gradient_scaling import scale_gradient
+from fourierf_plugin.model_components.regularisers.floaters import FloatersNoMore
+from fourierf_plugin.model_components.regularisers.occlusion import occlusion_penalty
 from fourierf_plugin.model_components.rendering import composite_target
-from fourierf_plugin.models.fourierf import FourieRFModel, FourieRFModelConfig, occlusion_penalty
+from fourierf_plugin.models.fourierf import FourieRFModel, FourieRFModelConfig
 from fourierf_plugin.pipelines.base import Pipeline
 from fourierf_plugin.scripts.train import build_config, parse_args
 from tests.helpers import TINY_FLAGS, TINY_SCENE, ndc_model
 
 ITERS = 50
+
+OCCLUSION = "fourierf_plugin.model_components.regularisers.occlusion"
 
 
 def pipeline_for(data: Path, out: Path, *flags: str) -> Pipeline:
@@ -81,7 +85,7 @@ def assert_same_training_batches(data: Path, out: Path, *flags: str, term: str) 
 def test_blender_pipeline_runs_nothing_ndc_specific(tmp_path: Path, monkeypatch) -> None:
     forbid(monkeypatch, "fourierf_plugin.data.datamanager", "ndc_rays")
     forbid(monkeypatch, "fourierf_plugin.models.fourierf", "ndc_samples")
-    forbid(monkeypatch, "fourierf_plugin.models.fourierf", "occlusion_penalty")
+    forbid(monkeypatch, OCCLUSION, "occlusion_penalty")
     pipeline = pipeline_for(TINY_SCENE, tmp_path)
     assert pipeline.effects == SceneEffects("white", "euclidean", False, False) == pipeline.model.effects
     assert pipeline.datamanager.ray_space == "euclidean"
@@ -123,7 +127,7 @@ def test_llff_pipeline_gets_ndc_rays_a_black_eval_background_and_the_occlusion_t
 
 
 def test_the_occlusion_override_removes_the_term(tmp_path: Path, llff_scene: Path, monkeypatch) -> None:
-    forbid(monkeypatch, "fourierf_plugin.models.fourierf", "occlusion_penalty")
+    forbid(monkeypatch, OCCLUSION, "occlusion_penalty")
     pipeline = pipeline_for(llff_scene, tmp_path, "--pipeline.effects.occlusion-regularization", "False")
     _, metrics = pipeline.train_step(0)
     assert "occlusion" not in metrics
@@ -189,34 +193,6 @@ def parallel_ndc_rays(n: int, seed: int = 1) -> tuple[torch.Tensor, torch.Tensor
 # -- occlusion penalty ----------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(("k", "m"), [(128, 20), (64, 10), (256, 40), (7, 1)])
-def test_occlusion_penalty_sums_the_first_m_samples(k: int, m: int) -> None:
-    sigma = torch.arange(3 * k, dtype=torch.float64).reshape(3, k) / k
-    expected = sigma[:, :m].sum(dim=-1).mean() / k  # = mean over rays and all K samples of σ_k 1[k < M]
-    torch.testing.assert_close(occlusion_penalty(sigma, 20 / 128, 1.0), expected)
-    masked = sigma * (torch.arange(k) < m)
-    torch.testing.assert_close(occlusion_penalty(sigma, 20 / 128, 1.0), masked.mean())
-
-
-def test_occlusion_penalty_ignores_samples_past_m() -> None:
-    sigma = torch.zeros(4, 128)
-    sigma[:, 20:] = 100.0
-    assert occlusion_penalty(sigma, 20 / 128, 1.0).item() == 0.0
-    sigma[:, 19] = 128.0
-    assert occlusion_penalty(sigma, 20 / 128, 1.0).item() == pytest.approx(1.0)
-
-
-@pytest.mark.parametrize("distance_scale", [1.0, 2.5, 25.0])
-def test_occlusion_penalty_is_on_freenerfs_sigma(distance_scale: float) -> None:
-    """FreeNeRF composites 1 - exp(-σ_F δ), this pipeline 1 - exp(-distance_scale σ δ): the term is on σ_F, linear in
-    the distance scale, so at the default 25 it is 25 times the term on the raw σ."""
-    sigma = torch.rand(5, 128, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
-    raw = occlusion_penalty(sigma, 20 / 128, 1.0)
-    torch.testing.assert_close(occlusion_penalty(sigma, 20 / 128, distance_scale), distance_scale * raw)
-    empty = occlusion_penalty(torch.zeros(0, 128, requires_grad=True), 20 / 128, distance_scale)
-    assert empty.item() == 0.0 and empty.requires_grad, "no rays: 0 with a graph, not NaN"
-
-
 def test_the_models_occlusion_term_follows_its_distance_scale() -> None:
     """Same σ (same seeded jitter), twice the distance scale: twice the occlusion term; 25× the raw-σ term at 25."""
     field = FieldConfig(n_voxels_init=4096, n_voxels_final=13824, density_activation="relu")
@@ -268,11 +244,6 @@ def test_scale_gradient_broadcasts_over_colour_channels() -> None:
     scale = torch.tensor([[0.25, 1.0, 0.0], [1.0, 1.0, 0.5]]).unsqueeze(-1)
     scale_gradient(x, scale).sum().backward()
     torch.testing.assert_close(x.grad, scale.expand(2, 3, 3))
-
-
-def test_floaters_scale_is_clamped_t_squared() -> None:
-    t = torch.tensor([0.0, 0.5, 1.0, 2.0, 6.0])
-    torch.testing.assert_close(floaters_scale(t), torch.tensor([0.0, 0.25, 1.0, 1.0, 1.0]))
 
 
 def floaters_model(floaters: bool, start: float = 0.0) -> FourieRFModel:
@@ -336,9 +307,11 @@ def test_floaters_scaling_starts_at_its_fraction_of_the_run() -> None:
     """With the scaling from half the run: before that step the gradients are the plain ones to the bit, from it on
     they are the scaled ones (the same as scaling the whole run)."""
     model = floaters_model(True, start=0.5)
-    half = model.floaters_from_step
+    (floaters,) = [r for r in model.regularisers if isinstance(r, FloatersNoMore)]
+    half = floaters.from_step
     assert half == round(0.5 * model.max_iters) > 0
-    assert [model.floaters_scaling_at(s) for s in (0, half - 1, half, model.max_iters)] == [False, False, True, True]
+    scaling = [bool(model.gradient_scalers_at(s)) for s in (0, half - 1, half, model.max_iters)]
+    assert scaling == [False, False, True, True]
     for step, reference in ((half - 1, False), (half, True)):
         late, _ = grads(True, training=True, start=0.5, step=step)
         same, _ = grads(reference, training=True, step=step)

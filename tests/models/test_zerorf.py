@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import copy
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 import torch
 
-from fourierf_plugin.configs.base import from_dict, to_dict
+from fourierf_plugin.accel import AccelConfig
+from fourierf_plugin.configs.base import from_dict, load_config, to_dict
 from fourierf_plugin.data.parsers.blender import BLENDER_DECLARATION
 from fourierf_plugin.engine.checkpoint import list_checkpoints, load_latest_checkpoint
 from fourierf_plugin.engine.estimates import checkpoint_bytes, estimate_seconds
@@ -20,11 +22,12 @@ from fourierf_plugin.engine.trainer import Trainer, TrainerConfig
 from fourierf_plugin.field_components.generator import ZeroRFConfig, parameter_count
 from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig
 from fourierf_plugin.fields.zerorf_field import ZeroRFField
-from fourierf_plugin.method_configs import all_methods
+from fourierf_plugin.method_configs import all_methods, config_registry
 from fourierf_plugin.model_components.marching import densities, densities_that_show
 from fourierf_plugin.model_components.occupancy import shrink_bounds
 from fourierf_plugin.model_components.rendering import composite_weights
 from fourierf_plugin.models.fourierf import FourieRFModel, FourieRFModelConfig
+from fourierf_plugin.models.zerorf import ZeroRFModelConfig, generator_config
 from fourierf_plugin.scripts import export as export_script
 from fourierf_plugin.scripts import render as render_script
 from fourierf_plugin.scripts import train as train_script
@@ -35,8 +38,8 @@ from fourierf_plugin.utils.errors import UserError
 from tests.helpers import TINY_FINAL_RESO, cli_exit_code, rays_through_the_slab, slab_model, tiny_args, train_tiny
 
 SMALL_FLAGS = [
-    "--pipeline.model.field.zerorf.plane-channels", "64", "32", "32",
-    "--pipeline.model.field.zerorf.line-channels", "32", "32", "32",
+    "--pipeline.model.zerorf.plane-channels", "64", "32", "32",
+    "--pipeline.model.zerorf.line-channels", "32", "32", "32",
 ]  # fmt: skip
 """Narrow generators for the runs that test the pipeline rather than ZeroRF's widths (a few times faster)."""
 BOX = torch.tensor([[-1.5] * 3, [1.5] * 3])
@@ -45,11 +48,9 @@ BOX = torch.tensor([[-1.5] * 3, [1.5] * 3])
 def _model(max_iters: int = 20, **model_changes) -> FourieRFModel:
     """zerorf-vm's model on the Blender box, 16³ → 24³, with narrow generators."""
     preset = all_methods["zerorf-vm"].pipeline.model
-    field = copy.deepcopy(preset.field)
-    field.n_voxels_init, field.n_voxels_final = 16**3, 24**3
-    field.zerorf.plane_channels, field.zerorf.line_channels = (64, 32), (32, 32)
     config = copy.deepcopy(preset)
-    config.field = field
+    config.field.n_voxels_init, config.field.n_voxels_final = 16**3, 24**3
+    config.zerorf.plane_channels, config.zerorf.line_channels = (64, 32), (32, 32)
     for key, value in model_changes.items():
         setattr(config, key, value)
     return config.setup(
@@ -68,8 +69,9 @@ def test_the_preset_is_zerorf_on_the_same_pipeline() -> None:
     config = parse_args(["zerorf-vm"])
     assert config.method_name == "zerorf-vm"
     model, optimizer = config.pipeline.model, config.optimizer
-    assert model.field.zerorf.enabled and not model.fourier.enabled
+    assert isinstance(model, ZeroRFModelConfig) and not model.fourier.enabled
     assert model.tv_weight_density == model.tv_weight_appearance == model.l1_weight_initial == 0.0
+    assert model == ZeroRFModelConfig(), "the preset is ZeroRF's model config at its defaults"
     assert (optimizer.lr_generator, optimizer.betas, optimizer.weight_decay) == (2e-3, (0.9, 0.98), 0.2)
     assert optimizer.lr_decay_ratio == 1.0
     assert config.pipeline.effects.view_dependent is True
@@ -81,7 +83,8 @@ def test_the_preset_is_zerorf_on_the_same_pipeline() -> None:
 def test_the_other_presets_keep_free_factors() -> None:
     for name, preset in all_methods.items():
         if name != "zerorf-vm":
-            assert not preset.pipeline.model.field.zerorf.enabled, name
+            assert generator_config(preset.pipeline.model) is None, name
+            assert type(preset.pipeline.model) is FourieRFModelConfig, name
 
 
 # -- the field behind the model's interface ---------------------------------------------------------------------------
@@ -209,7 +212,7 @@ def test_evaluation_render_and_export_read_a_zerorf_run(tmp_path: Path) -> None:
     _, run_dir = train_tiny(tmp_path / "train", method="zerorf-vm", iters=12, extra=SMALL_FLAGS)
     config_path = run_dir / "config.json"
     saved = json.loads(config_path.read_text())["config"]
-    assert saved["method_name"] == "zerorf-vm" and saved["pipeline"]["model"]["field"]["zerorf"]["enabled"]
+    assert saved["method_name"] == "zerorf-vm" and saved["pipeline"]["model"]["_type"] == "ZeroRFModelConfig"
 
     report = run_eval(
         EvalConfig(load_config=config_path, output_path=tmp_path / "eval.json", render_dir=Path("none"), device="cpu")
@@ -233,17 +236,17 @@ def test_evaluation_render_and_export_read_a_zerorf_run(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("changes", "flag"),
     [
-        ({"noise_channels": 0}, "--pipeline.model.field.zerorf.noise-channels 0"),
-        ({"feature_channels": 0}, "--pipeline.model.field.zerorf.feature-channels 0"),
-        ({"plane_channels": (256, 100)}, "--pipeline.model.field.zerorf.plane-channels 256 100"),
-        ({"line_channels": (128, 40)}, "--pipeline.model.field.zerorf.line-channels 128 40"),
-        ({"noise_resolution": -4}, "--pipeline.model.field.zerorf.noise-resolution -4"),
+        ({"noise_channels": 0}, "--pipeline.model.zerorf.noise-channels 0"),
+        ({"feature_channels": 0}, "--pipeline.model.zerorf.feature-channels 0"),
+        ({"plane_channels": (256, 100)}, "--pipeline.model.zerorf.plane-channels 256 100"),
+        ({"line_channels": (128, 40)}, "--pipeline.model.zerorf.line-channels 128 40"),
+        ({"noise_resolution": -4}, "--pipeline.model.zerorf.noise-resolution -4"),
     ],
 )
 def test_bad_generator_options_are_user_errors_naming_the_flag(changes: dict, flag: str) -> None:
     config = copy.deepcopy(all_methods["zerorf-vm"])
     for key, value in changes.items():
-        setattr(config.pipeline.model.field.zerorf, key, value)
+        setattr(config.pipeline.model.zerorf, key, value)
     with pytest.raises(UserError) as info:
         check_training_options(config)
     assert flag in info.value.problem and "ZeroRF's value" in (info.value.fix or "")
@@ -259,14 +262,8 @@ def test_density_axes_are_refused_for_generated_factors() -> None:
     assert "--pipeline.model.fourier.density-axes 0 1" in info.value.problem and "ZeroRF" in info.value.problem
 
 
-def test_generator_options_of_a_method_that_does_not_use_them_are_not_checked() -> None:
-    config = copy.deepcopy(all_methods["fourierf-vm"])
-    config.pipeline.model.field.zerorf = ZeroRFConfig(enabled=False, plane_channels=(100,))
-    check_training_options(config)
-
-
 def test_the_cli_rejects_zero_noise_channels_with_exit_2(tmp_path: Path) -> None:
-    args = tiny_args(tmp_path, "zerorf-vm", iters=2, extra=["--pipeline.model.field.zerorf.noise-channels", "0"])
+    args = tiny_args(tmp_path, "zerorf-vm", iters=2, extra=["--pipeline.model.zerorf.noise-channels", "0"])
     assert cli_exit_code(train_script.main, args) == EXIT_USER_ERROR
     assert not list(tmp_path.rglob("config.json")), "nothing was written"
 
@@ -276,9 +273,10 @@ def test_an_unknown_optimiser_group_is_a_clear_error() -> None:
         build_optimizer(OptimizerConfig(), {"mystery": [torch.nn.Parameter(torch.zeros(1))]})
 
 
-def test_field_config_defaults_keep_zerorf_off() -> None:
-    assert FieldConfig().zerorf.enabled is False
-    assert FourieRFModelConfig().field.zerorf == ZeroRFConfig()
+def test_zerorf_is_a_model_config_of_its_own() -> None:
+    assert not hasattr(FieldConfig(), "zerorf") and not hasattr(FourieRFModelConfig(), "zerorf")
+    assert ZeroRFModelConfig().zerorf == ZeroRFConfig()
+    assert issubclass(ZeroRFModelConfig._target, FourieRFModel)
 
 
 def test_the_cost_estimate_counts_the_generators() -> None:
@@ -289,7 +287,7 @@ def test_the_cost_estimate_counts_the_generators() -> None:
         config.pipeline.datamanager.rays_per_batch = 1024
         config.pipeline.model.field.n_voxels_final = 128**3
     assert estimate_seconds(zerorf, 2) > 4 * estimate_seconds(tensorf, 2)
-    expected = parameter_count(zerorf.pipeline.model.field.zerorf) * 4 * 3 + 1e6
+    expected = parameter_count(zerorf.pipeline.model.zerorf) * 4 * 3 + 1e6
     assert checkpoint_bytes(zerorf, 0) == pytest.approx(expected)
 
 
@@ -333,3 +331,19 @@ def test_occlusion_culling_keeps_gradients_only_where_samples_show() -> None:
     image_full = (weights.unsqueeze(-1) * 0.5).sum(1)
     image_culled = (composite_weights(culled.detach(), samples.deltas, scale).unsqueeze(-1) * 0.5).sum(1)
     torch.testing.assert_close(image_culled, image_full, atol=1e-3, rtol=0)
+
+
+def test_a_format_2_config_json_loads_as_zerorfs_model_config(tmp_path: Path) -> None:
+    """config.json of format 2 kept ZeroRF as ``field.zerorf.enabled``; it loads as ZeroRF's model config, and the
+    plain grid operations' old name as their new one."""
+    config = to_dict(all_methods["zerorf-vm"])
+    model = config["pipeline"]["model"]
+    model["_type"] = "FourieRFModelConfig"
+    model["field"]["zerorf"] = {"_type": "ZeroRFConfig", "enabled": True, **to_dict(model.pop("zerorf"))}
+    model["accel"]["backend"] = "reference"
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps({"fourierf_version": "0.1.0", "config_format": 2, "config": config}))
+    loaded = load_config(path, TrainerConfig, config_registry())
+    assert type(loaded.pipeline.model) is ZeroRFModelConfig
+    assert loaded.pipeline.model.accel.backend == "reference-grid-ops"
+    assert replace(loaded.pipeline.model, accel=AccelConfig()) == all_methods["zerorf-vm"].pipeline.model

@@ -178,7 +178,7 @@ def run_side(
     report = work / f"{label}.eval.json"
     evaluate = [
         sys.executable, "-P", "-m", "fourierf_plugin.scripts.eval", "--load-config", str(run_dir / "config.json"),
-        "--output-path", str(report), "--render-dir", "none",
+        "--output-path", str(report), "--render-dir", "none", "--overwrite",
         "--lpips-weights", str(shared / "lpips/lpips_alex_v0.1.pth"),
     ]  # fmt: skip
     _, _, code_ = run_timed(evaluate, work / f"{label}.eval.log", env)

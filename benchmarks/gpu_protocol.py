@@ -63,7 +63,7 @@ def run(name: str, scene: Path, parser: list[str], args: argparse.Namespace) -> 
     s_per_it = (elapsed[tail[-1]] - elapsed[tail[0]]) / (tail[-1] - tail[0]) if len(tail) > 1 else None
     report = args.work / f"{name}.eval.json"
     evaluate = [str(BIN / "fourierf-eval"), "--load-config", str(run_dir / "config.json"), "--output-path",
-                str(report), "--render-dir", "none", "--device", args.device]  # fmt: skip
+                str(report), "--render-dir", "none", "--overwrite", "--device", args.device]  # fmt: skip
     if args.lpips is not None:
         evaluate += ["--lpips-weights", str(args.lpips)]
     _, _, code = run_timed(evaluate, args.work / f"{name}.eval.log")

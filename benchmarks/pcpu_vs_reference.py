@@ -77,7 +77,7 @@ def our_run(shared: Path, seed: int, work: Path) -> dict:
         report = work / f"ours-{seed}.step{step}.json"
         cmd = [
             str(BIN / "fourierf-eval"), "--load-config", str(run_dir / "config.json"), "--checkpoint", str(ckpt),
-            "--output-path", str(report), "--render-dir", "none", "--lpips-weights",
+            "--output-path", str(report), "--render-dir", "none", "--overwrite", "--lpips-weights",
             str(shared / "lpips/lpips_alex_v0.1.pth"),
         ]  # fmt: skip
         if run_timed(cmd, work / f"ours-{seed}.eval.log")[2] != 0:

@@ -118,7 +118,7 @@ def evaluate(
     eval_json = work / f"{key}{tag}.eval.json"
     eval_cmd = [
         str(BIN / "fourierf-eval"), "--load-config", str(run_dir / "config.json"), "--output-path", str(eval_json),
-        "--lpips-weights", str(lpips), "--split", split,
+        "--lpips-weights", str(lpips), "--split", split, "--overwrite",
         *(["--checkpoint", str(checkpoint)] if checkpoint is not None else []), *thread_flags(threads),
     ]  # fmt: skip
     eval_s, _, code = run_timed(eval_cmd, work / f"{key}{tag}.eval.log")

@@ -155,7 +155,7 @@ def write_run_frame(run_dir: Path, outputs: Any, ray_space: str) -> Path | None:
         cameras = outputs.cameras
         far = None if outputs.depth_bounds is None else NDC_FAR_MARGIN * float(outputs.depth_bounds[1])
         ndc = NdcFrame(float(cameras.fx[0]), int(cameras.width), int(cameras.height), 1.0, far)
-    return write_dataparser_transforms(run_dir, outputs.dataparser_transform, ndc, outputs.object_box)
+    return write_dataparser_transforms(run_dir, outputs.dataparser_transform, ndc, getattr(outputs, "object_box", None))
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,9 @@ each view as it is scored).
 
 from __future__ import annotations
 
+import os
 import shutil
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -24,48 +26,62 @@ from fourierf_plugin.utils.metrics import mean_and_std, psnr, ssim
 METRICS = ("psnr", "ssim", "lpips")
 
 
+def check_render_dir(render_dir: Path, overwrite: bool, keep: tuple[Path, ...] = ()) -> None:
+    """Refuse a ``--render-dir`` whose contents the renders would replace: an existing non-empty folder without
+    ``overwrite``, and even with it a folder holding anything but PNGs or one that holds ``keep`` (the working
+    folder, the run, the report): a mistyped ``..`` must never empty a parent."""
+    if not render_dir.exists() and not render_dir.is_symlink():
+        return
+    if not render_dir.is_dir():
+        fail(f"--render-dir {render_dir} is an existing file", "choose a folder path, or 'none' to skip the renders")
+    if not any(render_dir.iterdir()):
+        return
+    if not overwrite:
+        fail(
+            f"--render-dir {render_dir} already exists and is not empty",
+            "choose another --render-dir, or pass --overwrite to replace its renders",
+        )
+    target = Path(os.path.realpath(render_dir))
+    holds = [k for k in keep if target == Path(os.path.realpath(k)) or target in Path(os.path.realpath(k)).parents]
+    foreign = [p.name for p in render_dir.iterdir() if p.suffix.lower() != ".png" or not p.is_file()]
+    if holds or foreign:
+        what = f"holds {holds[0]}" if holds else f"holds more than renders ({', '.join(sorted(foreign)[:3])})"
+        fail(f"--render-dir {render_dir} {what}: --overwrite replaces only a folder of renders", "choose a new folder")
+
+
 def evaluate(
     run: LoadedRun,
     split: Split,
     lpips: LPIPS | None = None,
     render_dir: Path | None = None,
     on_view: Callable[[dict], None] | None = None,
+    overwrite: bool = False,
 ) -> dict:
     """Render and score every view of ``split``; the renders go to ``render_dir`` as PNGs (None: not written).
 
-    The PNGs are written into ``<render_dir>.partial`` and the folder is renamed when every view is done, so a
-    ``render_dir`` always holds a complete set. Returns the report ``fourierf-eval`` writes: per-image and mean
-    metrics, the checkpoint, timings.
+    The PNGs are written into a hidden sibling folder made for this call and renamed to ``render_dir`` when every
+    view is done, so a ``render_dir`` always holds a complete set; an existing non-empty one is replaced only with
+    ``overwrite`` (``check_render_dir``), and the sibling is removed if the evaluation stops. Returns the report
+    ``fourierf-eval`` writes: per-image and mean metrics, the checkpoint, timings.
     """
-    per_image = []
-    stems: set[str] = set()  # names from the dataset, made safe and distinct as file names
+    if render_dir is not None:
+        check_render_dir(render_dir, overwrite)
     started = time.perf_counter()
-    partial = None if render_dir is None else render_dir.with_name(render_dir.name + ".partial")
-    if partial is not None:
-        shutil.rmtree(partial, ignore_errors=True)  # what an interrupted evaluation left
-        partial.mkdir(parents=True)
-    for index, r in enumerate(run.pipeline.render_views(split, run.step)):
-        item = {
-            "name": r.view.name,
-            "view_id": r.view.view_id,
-            "psnr": psnr(r.rgb, r.target),
-            "ssim": ssim(r.rgb, r.target),
-            "render_seconds": r.seconds,
-        }
-        if lpips is not None:
-            item["lpips"] = lpips.distance(r.rgb.to(run.device), r.target.to(run.device))
-        per_image.append(item)
+    partial = None
+    if render_dir is not None:
+        try:
+            render_dir.parent.mkdir(parents=True, exist_ok=True)
+            partial = Path(tempfile.mkdtemp(prefix=f".{render_dir.name}.", suffix=".partial", dir=render_dir.parent))
+        except OSError as err:
+            fail(f"cannot write to {render_dir.parent} ({err.strerror or err})", "choose a writable --render-dir")
+    try:
+        per_image = _score_views(run, split, lpips, partial, on_view)
+        if render_dir is not None and partial is not None:
+            _put_in_place(partial, render_dir, overwrite)
+    except BaseException:
         if partial is not None:
-            iio.imwrite(partial / f"{unique_safe_name(r.view.name, index, stems)}.png", to_uint8(r.rgb))
-        if on_view is not None:
-            on_view(item)
-    if not per_image:
-        data = run.config.pipeline.datamanager.dataparser.data
-        fail(f"the {split} split of {data} has no views", "evaluate another split")
-    if render_dir is not None and partial is not None:
-        if render_dir.exists():  # an earlier evaluation of the same step and split: the same renders
-            shutil.rmtree(render_dir)
-        partial.rename(render_dir)
+            shutil.rmtree(partial, ignore_errors=True)  # made by this call: a half-filled folder helps no one
+        raise
     results: dict[str, float | None] = {}
     for key in METRICS:
         values = [p[key] for p in per_image if key in p]
@@ -89,3 +105,49 @@ def evaluate(
         "per_image": per_image,
         "render_dir": str(render_dir) if render_dir is not None else None,
     }
+
+
+def _score_views(
+    run: LoadedRun,
+    split: Split,
+    lpips: LPIPS | None,
+    folder: Path | None,
+    on_view: Callable[[dict], None] | None,
+) -> list[dict]:
+    """Each view's metrics (its render written to ``folder`` as a PNG); a split without views is a clear error."""
+    per_image = []
+    stems: set[str] = set()  # names from the dataset, made safe and distinct as file names
+    for index, r in enumerate(run.pipeline.render_views(split, run.step)):
+        item = {
+            "name": r.view.name,
+            "view_id": r.view.view_id,
+            "psnr": psnr(r.rgb, r.target),
+            "ssim": ssim(r.rgb, r.target),
+            "render_seconds": r.seconds,
+        }
+        if lpips is not None:
+            item["lpips"] = lpips.distance(r.rgb.to(run.device), r.target.to(run.device))
+        per_image.append(item)
+        if folder is not None:
+            iio.imwrite(folder / f"{unique_safe_name(r.view.name, index, stems)}.png", to_uint8(r.rgb))
+        if on_view is not None:
+            on_view(item)
+    if not per_image:
+        data = run.config.pipeline.datamanager.dataparser.data
+        fail(f"the {split} split of {data} has no views", "evaluate another split")
+    return per_image
+
+
+def _put_in_place(staged: Path, final: Path, overwrite: bool) -> None:
+    """Rename the finished folder to ``final``; an earlier non-empty one goes only with ``overwrite``, and only once
+    the new set is complete (checked again here: another process may have filled it meanwhile)."""
+    check_render_dir(final, overwrite)
+    old = None
+    if final.exists() and any(final.iterdir()):
+        old = final.with_name(f".{final.name}.old-{os.getpid()}")
+        final.rename(old)
+    elif final.is_dir():
+        final.rmdir()  # empty: nothing of the user's is lost
+    staged.rename(final)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)

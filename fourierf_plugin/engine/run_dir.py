@@ -7,11 +7,13 @@ separators, no ``..``) and the last level is claimed with an atomic ``mkdir(exis
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 from datetime import datetime
 from pathlib import Path
 
+from fourierf_plugin.utils.console import warn
 from fourierf_plugin.utils.errors import UserError
 
 MAX_NAME_LEN = 100
@@ -82,3 +84,94 @@ def make_run_dir(output_dir: Path, scene: str, method: str, timestamp: str | Non
         f"{_MAX_SUFFIX} runs named {stamp} already exist in {parent}",
         fix="pass a different timestamp, or clean up old runs",
     )
+
+
+LOCK_NAME = ".lock"
+_HELD: dict[str, RunLock] = {}
+
+
+def _pid_in(path: Path) -> int | None:
+    try:
+        text = path.read_text().strip()
+    except OSError:
+        return None
+    return int(text) if text.isdigit() else None
+
+
+class RunLock:
+    """``RUN/.lock``, held by the one process that trains the run: an advisory ``flock`` the system drops when that
+    process dies, with its PID inside to name it. Why: two trainers on one folder mix their checkpoints and logs."""
+
+    def __init__(self, run_dir: Path, fd: int) -> None:
+        self.path = Path(run_dir) / LOCK_NAME
+        self._fd: int | None = fd
+
+    def release(self) -> None:
+        """Remove the file, then drop the lock (idempotent); the next trainer starts from no file at all."""
+        if self._fd is None:
+            return
+        _HELD.pop(os.path.realpath(self.path.parent), None)
+        with contextlib.suppress(OSError):
+            self.path.unlink()
+        os.close(self._fd)  # closing drops the flock
+        self._fd = None
+
+
+def lock_run(run_dir: Path) -> RunLock:
+    """Take ``RUN/.lock`` for this process: a run another live process trains is a clear error naming its PID; a
+    lock left by a process that no longer runs is taken over with a note."""
+    key = os.path.realpath(run_dir)
+    if key in _HELD:  # this process holds it already (a trainer made again in the same process)
+        return _HELD[key]
+    path = Path(run_dir) / LOCK_NAME
+    while True:
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as err:
+            raise UserError(f"cannot create the lock file {path}: {err}", fix="choose a writable run folder") from err
+        if not _try_lock(fd, path):
+            os.close(fd)
+            pid = _pid_in(path)
+            who = f"process {pid}" if pid is not None else "another process"
+            raise UserError(
+                f"the run {run_dir} is being trained by {who} (it holds {path})",
+                fix=f"wait for it to finish, or stop it{f' (kill {pid})' if pid else ''}, then resume",
+            )
+        try:
+            same = os.fstat(fd).st_ino == os.stat(path).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)  # the holder removed the file meanwhile: lock the new one
+    previous = _pid_in(path)
+    if previous is not None and previous != os.getpid():
+        warn(f"{path} names process {previous}, which no longer runs: this process takes the run over")
+    os.ftruncate(fd, 0)
+    os.write(fd, f"{os.getpid()}\n".encode())
+    lock = _HELD[key] = RunLock(Path(run_dir), fd)
+    return lock
+
+
+def _try_lock(fd: int, path: Path) -> bool:
+    """An exclusive non-blocking lock on ``fd``; without ``fcntl`` (Windows), the PID inside decides."""
+    try:
+        import fcntl
+    except ImportError:
+        pid = _pid_in(path)
+        return pid is None or pid == os.getpid() or not _pid_alive(pid)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    return True
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True

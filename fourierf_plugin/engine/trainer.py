@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import signal
 import time
@@ -21,7 +22,7 @@ from fourierf_plugin import __version__
 from fourierf_plugin.accel.config import uses_gpu_paths
 from fourierf_plugin.configs.base import InstantiateConfig, save_config
 from fourierf_plugin.data.dataparser_transforms import write_run_frame
-from fourierf_plugin.engine.checkpoint import load_latest_checkpoint, save_checkpoint
+from fourierf_plugin.engine.checkpoint import list_checkpoints, load_latest_checkpoint, save_checkpoint
 from fourierf_plugin.engine.estimates import describe_cost
 from fourierf_plugin.engine.health import DEAD_FIELD_FIX, dead_field_problem, flat_colour_psnr
 from fourierf_plugin.engine.machine import pick_device, seed_everything
@@ -34,7 +35,7 @@ from fourierf_plugin.engine.observers import (
 )
 from fourierf_plugin.engine.optimizers import OptimizerConfig, build_optimizer, set_learning_rates
 from fourierf_plugin.engine.option_checks import check_training_options
-from fourierf_plugin.engine.run_dir import make_run_dir
+from fourierf_plugin.engine.run_dir import lock_run, make_run_dir
 from fourierf_plugin.exporter.marching_cubes import describe, export_field_mesh
 from fourierf_plugin.pipelines.base import Pipeline, PipelineConfig
 from fourierf_plugin.utils.console import (
@@ -52,18 +53,44 @@ from fourierf_plugin.utils.phases import PhaseTimer, phase
 def drop_records_after(path: Path, step: int) -> None:
     """Forget log lines past the checkpoint a run resumes from (a killed run logged steps it never saved).
 
-    Rewritten atomically, so a crash here cannot lose the log either.
+    Rewritten atomically, so a crash here cannot lose the log either. A last line cut short (what a power cut or a
+    full disk leaves) is dropped with a warning; a damaged line elsewhere is a clear error.
     """
     if not path.is_file():
         return
-    lines = path.read_text().splitlines(keepends=True)
-    records = [(line, json.loads(line)) for line in lines if line.strip()]
+    lines = path.read_text(errors="replace").splitlines(keepends=True)
+    records = []
+    for number, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            records.append((line if line.endswith("\n") else line + "\n", json.loads(line)))
+        except json.JSONDecodeError:
+            if number < len(lines):
+                fail(f"{path}, line {number}, is not JSON", "delete that line (or the file), then resume")
+            warn(f"{path}: its last line is cut short (the run stopped while writing it): dropped")
     kept = [line for line, r in records if r.get("step", 0) <= step and r.get("event") != "done"]
-    if len(kept) == len(lines):
+    if kept == lines:
         return
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text("".join(kept))
     os.replace(tmp, path)
+
+
+def divergence_fix(optimizer: OptimizerConfig) -> str:
+    """What most likely made a run diverge: a learning rate above its default, else the scene's cameras."""
+    defaults = OptimizerConfig()
+    raised = [
+        f"--optimizer.{name.replace('_', '-')} {getattr(optimizer, name):g} (default {getattr(defaults, name):g})"
+        for name in ("lr_grids", "lr_networks", "lr_generator")
+        if getattr(optimizer, name) > getattr(defaults, name)
+    ]
+    if raised:
+        return f"lower {', '.join(raised)} and train again"
+    return (
+        "check the scene's cameras (a zero or negative focal length, poses far from the others), or lower "
+        "--optimizer.lr-grids, and train again"
+    )
 
 
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
@@ -139,6 +166,8 @@ class Trainer:
         self.console = get_console()
         self.start_step = 0
         self.resume_state: dict | None = None
+        self.last_finite_loss: tuple[int, float] | None = None
+        """The step and value of the latest finite training loss read (named when the loss diverges)."""
         check_training_options(config)  # the Python API gets the same option checks as the CLI
         if not config.pipeline.effects.is_resolved:
             raise ValueError(
@@ -171,6 +200,7 @@ class Trainer:
         else:
             assert c.load_dir is not None
             self.run_dir = Path(c.load_dir)
+        self.run_lock = lock_run(self.run_dir)  # before anything is written: one trainer per run folder
         self.checkpoint_dir = self.run_dir / "checkpoints"
         self.checkpoint_dir.mkdir(exist_ok=True)
         save_config(c, self.run_dir / "config.json")
@@ -215,6 +245,10 @@ class Trainer:
         }
 
     def save(self, step: int, optimizer: torch.optim.Optimizer) -> Path:
+        """Checkpoint ``step``; parameters that are no longer finite end the run instead, so a diverged state never
+        displaces the last good checkpoint."""
+        if not all(bool(torch.isfinite(p).all()) for p in self.pipeline.model.parameters()):
+            self._diverged(step, float("nan"))
         return save_checkpoint(self._state(step, optimizer), self.checkpoint_dir, step, self.config.keep_checkpoints)
 
     def _restore(self, state: dict, reset_steps: list[int]) -> torch.optim.Optimizer:
@@ -236,6 +270,27 @@ class Trainer:
             return
         self.console.print(f"mesh at step {step}: " + "; ".join(describe(report)))
 
+    # -- divergence -------------------------------------------------------------------------------------------------
+    def _check_finite(self, step: int, shown: dict[str, float]) -> None:
+        loss = shown.get("loss")
+        if loss is None:
+            return
+        if not math.isfinite(loss):
+            self._diverged(step, loss)
+        self.last_finite_loss = (step, loss)
+
+    def _diverged(self, step: int, loss: float) -> None:
+        """End a run whose loss or parameters stopped being finite: one clear message naming the step, the last
+        finite loss, the checkpoint kept and the likeliest cause."""
+        append_jsonl(self.run_dir / "metrics.jsonl", {"event": "diverged", "step": step, "loss": str(loss)})
+        last = self.last_finite_loss
+        seen = f"last finite loss {last[1]:.4g} at step {last[0]}" if last else "no finite loss read before"
+        kept = list_checkpoints(self.checkpoint_dir)
+        keeps = f"its last finite checkpoint {kept[-1].name} is kept" if kept else "no checkpoint was saved"
+        value = "NaN" if math.isnan(loss) else loss
+        problem = f"the training loss became {value} at step {step} ({seen}); the run stopped, {keeps} ({self.run_dir})"
+        fail(problem, divergence_fix(self.config.optimizer))
+
     # -- loop -------------------------------------------------------------------------------------------------------
     def _check_alive(self, done: int, shown: dict[str, float]) -> None:
         """A run whose field stayed empty, or renders worse than one flat colour, ends with a clear error."""
@@ -248,6 +303,13 @@ class Trainer:
             fail(f"{problem} after {done} iterations (run in {self.run_dir})", DEAD_FIELD_FIX)
 
     def train(self) -> Path:
+        """Train to the end (or a stop signal, or a diverged loss); the run folder's lock is released either way."""
+        try:
+            return self._train()
+        finally:
+            self.run_lock.release()
+
+    def _train(self) -> Path:
         c = self.config
         model = self.pipeline.model
         reset_steps = [s + 1 for s in model.reset_steps()]  # the first iterations run by a rebuilt optimiser
@@ -278,6 +340,7 @@ class Trainer:
                 log_now = done % c.log_every == 0 or done == c.max_num_iterations
                 if log_now or read_every_step:
                     shown = self.pipeline.read_metrics(metrics)
+                    self._check_finite(done, shown)
                 progress.update(done, **{k: shown[k] for k in ("loss", "psnr") if k in shown}, f=f_density)
                 record = None
                 if log_now:
@@ -309,6 +372,8 @@ class Trainer:
             self.console.print(f"resume with: fourierf-train {c.method_name} --load-dir {self.run_dir}")
             raise SystemExit(interrupt.exit_code)
         done_record = {"event": "done", "step": done, "train_seconds": elapsed}
+        if c.planned_train_seconds is not None:
+            done_record["planned_train_seconds"] = c.planned_train_seconds
         if self.device.type == "cuda":
             done_record["peak_device_memory_gb"] = torch.cuda.max_memory_allocated(self.device) / 2**30
         if timer is not None:
@@ -319,6 +384,12 @@ class Trainer:
         self.console.print(
             f"trained {done - self.start_step} iterations in {format_duration(elapsed)}; run in {self.run_dir}"
         )
+        if c.planned_train_seconds is not None and not self.start_step:
+            planned = c.planned_train_seconds
+            self.console.print(
+                f"time budget {c.time_budget}: planned training time {format_duration(planned)}, actual "
+                f"{format_duration(elapsed)} ({elapsed / planned - 1:+.0%})"
+            )
         if shown.get("revived_batches"):
             self.console.print(f"a dead density field was revived on {shown['revived_batches']:.0f} training batches")
         self.console.print(f"evaluate with: fourierf-eval --load-config {self.run_dir / 'config.json'}")
@@ -370,6 +441,9 @@ class TrainerConfig(InstantiateConfig):
     render rate so training slows by at most about ``viewer_max_slowdown``."""
     viewer_port: int = 7007
     """Port of the web viewer (the next free one is taken, and said, when it is in use)."""
+    viewer_host: str = "127.0.0.1"
+    """Interface the web viewer listens on: 127.0.0.1 is this machine only; 0.0.0.0 (every interface) lets other
+    machines open the page, which has no password."""
     viewer_max_slowdown: float = 0.03
     """The share of training time the live viewer's snapshots, renders and meshes may take (0.03: 3 %). Each picture
     also costs the browser: on a 2-core CPU with the browser on it, training slowed by about twice this share plus the
@@ -383,3 +457,9 @@ class TrainerConfig(InstantiateConfig):
     budget_rule: bool = True
     """Runs shorter than the paper's 10k iterations get the values chosen on validation views for short runs
     (docs/defaults.md, one section per rule); False keeps the preset's values at any budget."""
+    time_budget: str | None = None
+    """Train for this long (90s, 5m, 1.5h, 1h30m) instead of a set iteration count: timing a few steps first, the
+    run picks the count that ends training within it (setup and evaluation not included); every schedule stays a
+    fraction of the run. Not with --max-num-iterations, nor on resume."""
+    planned_train_seconds: tyro.conf.Suppress[float | None] = None
+    """The training time a --time-budget run planned (set by finalize), compared with the actual one at the end."""

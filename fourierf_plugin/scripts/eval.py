@@ -10,10 +10,11 @@ from typing import Literal
 import tyro
 from rich.markup import escape
 
-from fourierf_plugin.engine.evaluation import evaluate
+from fourierf_plugin.engine.evaluation import check_render_dir, evaluate
 from fourierf_plugin.scripts.cli import run_cli, strip_verbose
 from fourierf_plugin.scripts.run_options import RunOptions
 from fourierf_plugin.utils.console import get_console, warn, write_json
+from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.utils.files import check_writable_dir
 from fourierf_plugin.utils.lpips import LPIPS, default_lpips_weights
 
@@ -27,7 +28,10 @@ class EvalConfig(RunOptions):
     lpips_weights: Path | None = None
     """LPIPS-alex v0.1 weights (default: $FOURIERF_LPIPS_WEIGHTS or ../shared/lpips)."""
     render_dir: Path | None = None
-    """Where to save the rendered images (default: RUN/renders/<split>-step<N>/; 'none' skips)."""
+    """Where to save the rendered images (default: RUN/renders/<split>-step<N>/, or a free -1, -2 ... beside an
+    earlier one; 'none' skips)."""
+    overwrite: bool = False
+    """Replace an existing --output-path and a --render-dir of earlier renders (otherwise both are refused)."""
 
 
 def print_view(item: dict) -> None:
@@ -38,18 +42,47 @@ def print_view(item: dict) -> None:
     )
 
 
+def skips_renders(path: Path | None) -> bool:
+    return path is not None and str(path).lower() == "none"
+
+
+def check_outputs(cfg: EvalConfig) -> None:
+    """Before any work: the report and the renders can be written, and replace nothing without --overwrite."""
+    out = cfg.output_path
+    if out.is_dir():
+        fail(f"--output-path {out} is a folder", "name the report file, e.g. --output-path eval.json")
+    if out.exists() and not cfg.overwrite:
+        fail(f"--output-path {out} already exists", "choose another --output-path, or pass --overwrite to replace it")
+    check_writable_dir(out.parent, "--output-path")
+    if cfg.render_dir is not None and not skips_renders(cfg.render_dir):
+        check_render_dir(cfg.render_dir, cfg.overwrite, keep=(Path.cwd(), out, Path(cfg.load_config)))
+        check_writable_dir(cfg.render_dir.parent, "--render-dir")
+
+
+def default_render_dir(run_dir: Path, split: str, step: int, overwrite: bool) -> Path:
+    """RUN/renders/<split>-step<N>/, or with --overwrite that folder again; else the first free ``-1``, ``-2`` ...
+    beside it, so a second evaluation keeps the first one's renders."""
+    base = run_dir / "renders" / f"{split}-step{step:06d}"
+    if overwrite or not base.exists():
+        return base
+    n = 1
+    while base.with_name(f"{base.name}-{n}").exists():
+        n += 1
+    return base.with_name(f"{base.name}-{n}")
+
+
 def run_eval(cfg: EvalConfig) -> dict:
     console = get_console()
-    check_writable_dir(cfg.output_path.parent, "--output-path")
-    if cfg.render_dir is not None and str(cfg.render_dir).lower() != "none":
-        check_writable_dir(cfg.render_dir.parent, "--render-dir")
+    check_outputs(cfg)
     run = cfg.load_run()
     weights = cfg.lpips_weights or default_lpips_weights()
     lpips = LPIPS(weights).to(run.device) if weights is not None else None
     if lpips is None:
         warn("LPIPS weights not found; LPIPS is skipped (pass --lpips-weights PATH to include it)")
-    render_dir = cfg.render_dir or run.run_dir / "renders" / f"{cfg.split}-step{run.step:06d}"
-    report = evaluate(run, cfg.split, lpips, None if str(render_dir).lower() == "none" else render_dir, print_view)
+    render_dir = cfg.render_dir or default_render_dir(run.run_dir, cfg.split, run.step, cfg.overwrite)
+    report = evaluate(
+        run, cfg.split, lpips, None if skips_renders(render_dir) else render_dir, print_view, cfg.overwrite
+    )
     write_json(cfg.output_path, report)
     results = report["results"]
     summary = f"psnr {results['psnr']:.2f}  ssim {results['ssim']:.4f}"

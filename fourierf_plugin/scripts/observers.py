@@ -19,5 +19,5 @@ def build_observers(config: TrainerConfig) -> list[TrainingObserver]:
     if config.viewer:
         from fourierf_plugin.viewer.live import LiveViewer
 
-        observers.append(LiveViewer(port=config.viewer_port, max_slowdown=config.viewer_max_slowdown))
+        observers.append(LiveViewer(config.viewer_port, config.viewer_max_slowdown, config.viewer_host))
     return observers

@@ -20,7 +20,7 @@ from fourierf_plugin.scripts.run_options import RunOptions
 from fourierf_plugin.utils.console import get_console
 from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.viewer.scene_view import held_out_views
-from fourierf_plugin.viewer.server import ViewerServer, ViewerSettings, open_server, require_viser
+from fourierf_plugin.viewer.server import ViewerServer, ViewerSettings, open_server, require_viser, served_url
 from fourierf_plugin.viewer.viewed_run import ViewedRun
 
 
@@ -28,8 +28,9 @@ from fourierf_plugin.viewer.viewed_run import ViewedRun
 class ViewerConfig(RunOptions):
     port: int = 7007
     """Port of the page (the next free one is taken, and said, when it is in use)."""
-    host: str = "0.0.0.0"
-    """Interface to listen on (127.0.0.1: this machine only)."""
+    host: str = "127.0.0.1"
+    """Interface to listen on: 127.0.0.1 is this machine only; 0.0.0.0 (every interface) lets other machines open
+    the page, which has no password."""
     preview_side: int = 256
     """Pixels along the longer side of the preview shown while the camera moves."""
     final_side: int = 768
@@ -43,10 +44,11 @@ class ViewerHandle:
     port: int
     run: LoadedRun
     view: ViewerServer
+    host: str = "127.0.0.1"
 
     @property
     def url(self) -> str:
-        return f"http://localhost:{self.port}"
+        return served_url(self.host, self.port)
 
     def stop(self) -> None:
         self.view.stop()
@@ -84,7 +86,7 @@ def serve(cfg: ViewerConfig) -> ViewerHandle:
         f"[bold]{escape(run.config.method_name)}[/bold] step {run.step} ({escape(str(run.checkpoint))})",
         soft_wrap=True,
     )
-    return ViewerHandle(int(server.get_port()), run, view)
+    return ViewerHandle(int(server.get_port()), run, view, cfg.host)
 
 
 def main(args: list[str] | None = None) -> None:

@@ -67,7 +67,7 @@ def render_model(pipeline: Pipeline) -> FourieRFModel:
 class LiveViewer:
     """A :class:`~fourierf_plugin.engine.observers.TrainingObserver` that serves the page while the run trains."""
 
-    def __init__(self, port: int, max_slowdown: float, host: str = "0.0.0.0") -> None:
+    def __init__(self, port: int, max_slowdown: float, host: str = "127.0.0.1") -> None:
         """Opens the server at once (before the run folder exists), so a missing extra or an unusable port stops
         the run before anything is written."""
         if not 0 < max_slowdown <= 1:

@@ -12,7 +12,12 @@ live viewer calls it from the training thread between steps (why: ``viewer.live`
 from __future__ import annotations
 
 import collections
+import contextlib
 import importlib
+import ipaddress
+import math
+import os
+import socket
 import threading
 import time
 from collections.abc import Callable
@@ -45,6 +50,14 @@ if TYPE_CHECKING:
 
 EXTRA_FIX = "pip install 'fourierf[viewer]'"
 MESH_RESOLUTION = 128
+LOOPBACK = "127.0.0.1"
+PREVIEW_SIDES = (32, 512)
+FINAL_SIDES = (64, 2048)
+MESH_EVERY_SECONDS = 10.0
+"""The least time between two meshes asked for from the page (each costs seconds and megabytes)."""
+MESH_FILES_PER_RUN = 50
+MESH_BYTES_PER_RUN = 512 * 2**20
+"""How many viewer meshes, and how many bytes of them, one run's ``meshes/`` may hold before the button refuses."""
 
 
 def require_viser() -> ModuleType:
@@ -56,18 +69,111 @@ def require_viser() -> ModuleType:
         raise UserError(problem, EXTRA_FIX) from err
 
 
-def open_server(port: int, host: str = "0.0.0.0") -> viser.ViserServer:
-    """A viser server on ``port``, or on the next free one when it is taken (said aloud, with the address); port 0
-    takes any free port."""
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` is reachable from this machine only (``localhost``, 127.0.0.0/8, ``::1``)."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def check_host(host: str, flag: str = "--host") -> None:
+    """A host the server can bind: an address of this machine or a name that resolves (one clear error otherwise)."""
+    try:
+        socket.getaddrinfo(host, None)
+    except (OSError, UnicodeError) as err:
+        fail(f"{flag} {host!r} is not an address of this machine ({err})", f"use {flag} {LOOPBACK} (this machine only)")
+
+
+def same_origin_request(host: str) -> Callable[[object, object], object]:
+    """A websocket handshake check: a browser's ``Origin`` must be the page's own (``Host``), so a page of another
+    site open in the same browser cannot drive the viewer; on a loopback bind the ``Host`` must be a loopback name
+    too (a rebound DNS name reaches 127.0.0.1 only through a foreign ``Host``). Clients without ``Origin`` (no
+    browser, so no foreign page) pass."""
+    from urllib.parse import urlsplit
+
+    def refused(request) -> str | None:
+        headers = request.headers
+        if headers.get("Upgrade", "").lower() != "websocket":
+            return None
+        served = headers.get("Host", "")
+        served_name = urlsplit(f"//{served}").hostname or ""
+        if is_loopback(host) and not is_loopback(served_name):
+            return f"host {served!r} is not this machine"
+        origin = headers.get("Origin")
+        if origin is not None and urlsplit(origin).netloc != served:
+            return f"origin {origin!r} is not the viewer's page"
+        return None
+
+    def check(connection, request):
+        reason = refused(request)
+        if reason is not None:
+            return connection.respond(403, f"refused: {reason}\n")
+        return None
+
+    return check
+
+
+_SERVE_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _checked_handshakes(host: str):
+    """While viser opens its server: every websocket handshake passes ``same_origin_request`` before viser's own
+    request handler (viser has no option for it)."""
+    import websockets.asyncio.server as ws_server
+
+    original = ws_server.serve
+    check = same_origin_request(host)
+
+    def serve(*args, **kwargs):
+        inner = kwargs.get("process_request")
+
+        def process_request(connection, request):
+            response = check(connection, request)
+            if response is not None or inner is None:
+                return response
+            return inner(connection, request)
+
+        kwargs["process_request"] = process_request
+        return original(*args, **kwargs)
+
+    with _SERVE_LOCK:
+        ws_server.serve = serve  # type: ignore[assignment]
+        try:
+            yield
+        finally:
+            ws_server.serve = original  # type: ignore[assignment]
+
+
+def served_url(host: str, port: int) -> str:
+    """The address a browser on this machine opens: the bound host itself, ``localhost`` for every interface."""
+    shown = "localhost" if host in ("0.0.0.0", "::", "") else host
+    return f"http://[{shown}]:{port}" if ":" in shown else f"http://{shown}:{port}"
+
+
+def open_server(port: int, host: str = LOOPBACK) -> viser.ViserServer:
+    """A viser server on ``host``:``port``, or on the next free port when it is taken (said aloud, with the address);
+    port 0 takes any free port. A host other machines can reach is warned about: the page has no password."""
     if not 0 <= port <= 65535:
         fail(f"--port {port} is not a TCP port", "pass a port in 1-65535, e.g. 7007 (0: any free port)")
+    check_host(host)
     viser_module = require_viser()
-    server = viser_module.ViserServer(host=host, port=port, verbose=False)
+    with _checked_handshakes(host):
+        server = viser_module.ViserServer(host=host, port=port, verbose=False)
     actual = server.get_port()
     console = get_console()
     if port != 0 and actual != port:
         console.print(f"[yellow]port {port} is in use: the viewer takes the next free port, {actual}[/yellow]")
-    console.print(f"[bold]viewer[/bold] at http://localhost:{actual} (Ctrl-C stops it)")
+    console.print(f"[bold]viewer[/bold] at {served_url(host, actual)} (Ctrl-C stops it)")
+    if not is_loopback(host):
+        warn(
+            f"the viewer listens on {host}: other machines that reach this one can open it, without a password, "
+            f"and write meshes into the run; for this machine only use --host {LOOPBACK} (an SSH tunnel reaches it "
+            "from elsewhere)"
+        )
     return server
 
 
@@ -129,14 +235,36 @@ def camera_state(camera: viser.CameraHandle) -> tuple[float, ...]:
 
 
 def unique_mesh_path(meshes: Path, f_density: float) -> Path:
-    """``meshes/viewer-f<value>.ply``, with -2, -3, ... appended rather than overwriting an earlier export."""
+    """``meshes/viewer-f<value>.ply``, with -2, -3, ... appended rather than overwriting an earlier export (or
+    writing through a link of that name)."""
     stem = f"viewer-f{f_density:.3f}"
     path = meshes / f"{stem}.ply"
     n = 2
-    while path.exists():
+    while os.path.lexists(path):
         path = meshes / f"{stem}-{n}.ply"
         n += 1
     return path
+
+
+def mesh_refusal(run_dir: Path, last_at: float | None, now: float) -> str | None:
+    """Why the page may not write another mesh now (None: it may): too soon after the last one, a ``meshes`` folder
+    that leads out of the run (a link), or the run's viewer meshes at their count or size limit."""
+    if last_at is not None and now - last_at < MESH_EVERY_SECONDS:
+        return f"one mesh per {MESH_EVERY_SECONDS:.0f} s: wait {MESH_EVERY_SECONDS - (now - last_at):.0f} s"
+    meshes = run_dir / "meshes"
+    run_real = os.path.realpath(run_dir)
+    if meshes.is_symlink() or os.path.commonpath([run_real, os.path.realpath(meshes)]) != run_real:
+        return f"{meshes} is a link out of the run folder: the viewer writes meshes only inside the run"
+    if not meshes.is_dir():
+        return None
+    written = [p for p in meshes.glob("viewer-f*.ply") if not p.is_symlink()]
+    total = sum(p.stat().st_size for p in written)
+    if len(written) >= MESH_FILES_PER_RUN or total >= MESH_BYTES_PER_RUN:
+        return (
+            f"{meshes} holds {len(written)} viewer meshes ({total / 2**20:.0f} MiB), the most one run keeps: "
+            "remove some to make more"
+        )
+    return None
 
 
 class ViewerServer:
@@ -171,6 +299,9 @@ class ViewerServer:
         self._rendering = False
         self.final_renders = 0
         self._mesh_requests: collections.deque[viser.ClientHandle | None] = collections.deque()
+        self._last_mesh_at: float | None = None
+        self._accepted: dict[str, object] = {}
+        """The last value of each control that passed ``_valid``: what renders and meshes use."""
         self.log: collections.deque[RenderRecord] = collections.deque(maxlen=1000)
         self.layout, self.frustums = build_scene(server, train, test)
         self._build_gui()
@@ -206,9 +337,46 @@ class ViewerServer:
         self.show_cameras = gui.add_checkbox("Show cameras", True, hint="training views orange, test views blue")
         self.show_cameras.on_update(lambda _: self._show_cameras(self.show_cameras.value))
         self.mesh_button = gui.add_button("Mesh at this cutoff", hint="marching cubes at the density cutoff")
-        for handle in (self.output, self.density_slider, self.color_slider, self.preview_slider, self.final_slider):
-            handle.on_update(lambda _: self.changed())
+        self._controls = {
+            "output": self.output,
+            "density": self.density_slider,
+            "colour": self.color_slider,
+            "preview": self.preview_slider,
+            "final": self.final_slider,
+        }
+        self._accepted = {name: handle.value for name, handle in self._controls.items()}
+        for name in self._controls:
+            self._controls[name].on_update(lambda _, name=name: self._control_moved(name))
         self.mesh_button.on_click(lambda event: self._mesh_clicked(event.client))
+
+    def _valid(self, name: str, value: object) -> bool:
+        """Whether a control's value is one the page offers: a page (or any websocket client) can send anything."""
+        if name == "output":
+            return isinstance(value, str) and value in OUTPUTS
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            return False
+        if name in ("density", "colour"):
+            top = max(self.viewed.run_cutoffs()[0 if name == "density" else 1], 0.01)
+            return 0.0 <= value <= top + 1e-9
+        low, high = PREVIEW_SIDES if name == "preview" else FINAL_SIDES
+        return low <= value <= high
+
+    def _control(self, name: str) -> object:
+        """A control's value if valid, else its last valid one (the control is set back to it)."""
+        handle = self._controls[name]
+        value = handle.value
+        if self._valid(name, value):
+            self._accepted[name] = value
+            return value
+        with contextlib.suppress(Exception):
+            handle.value = self._accepted[name]
+        return self._accepted[name]
+
+    def _control_moved(self, name: str) -> None:
+        """A page moved a control: redraw for a valid value; an invalid one is set back and changes nothing."""
+        before = self._accepted[name]
+        if self._control(name) != before:
+            self.changed()
 
     def _mesh_clicked(self, client: viser.ClientHandle | None) -> None:
         """At once on viser's thread, or queued for the host's next :meth:`do_due_work` (no thread of its own)."""
@@ -238,9 +406,18 @@ class ViewerServer:
                 slider.max = top
                 if at_top or slider.value > top:
                     slider.value = top
+        for name in ("density", "colour"):
+            self._control(name)
 
     def cutoffs(self) -> tuple[float, float]:
-        return float(self.density_slider.value), float(self.color_slider.value)
+        return float(self._control("density")), float(self._control("colour"))  # type: ignore[arg-type]
+
+    def output_name(self) -> Output:
+        return self._control("output")  # type: ignore[return-value]
+
+    def side(self, final: bool) -> int:
+        """Pixels along the longer side of a final picture or a preview."""
+        return int(self._control("final" if final else "preview"))  # type: ignore[call-overload]
 
     def refresh_status(self) -> None:
         self.status.content = self._status_text()
@@ -376,9 +553,9 @@ class ViewerServer:
 
     def _render(self, view: _ClientView, key: tuple[int, int], final: bool) -> None:
         camera = view.client.camera
-        side = int(self.final_slider.value if final else self.preview_slider.value)
+        side = self.side(final)
         pose = camera_from_opencv_pose(camera.wxyz, camera.position, camera.fov, camera.aspect, side)
-        output: Output = self.output.value  # type: ignore[assignment]
+        output = self.output_name()
         quality = self.settings.final_quality if final else self.settings.preview_quality
         size = (pose.width, pose.height) if final else self.pacer.render_size(pose.width, pose.height)
         started = time.perf_counter()
@@ -410,8 +587,16 @@ class ViewerServer:
 
     # -- mesh -------------------------------------------------------------------------------------------------------
     def export_mesh(self, client: viser.ClientHandle | None = None) -> Path | None:
-        """Marching cubes of the density at the slider's cutoff into RUN/meshes/ (never over an earlier file)."""
+        """Marching cubes of the density at the slider's cutoff into RUN/meshes/ (never over an earlier file, never
+        out of the run, at most one per ``MESH_EVERY_SECONDS`` and ``MESH_FILES_PER_RUN`` per run)."""
         f_density = self.cutoffs()[0]
+        refusal = mesh_refusal(self.viewed.run_dir, self._last_mesh_at, self.clock())
+        if refusal is not None:
+            warn(f"no mesh at cutoff {f_density:.3f}: {refusal}")
+            if client is not None:
+                client.add_notification("Mesh export", f"no mesh: {refusal}", auto_close_seconds=8.0)
+            return None
+        self._last_mesh_at = self.clock()
         self.mesh_button.disabled = True
         try:
             with self.viewed.lock:

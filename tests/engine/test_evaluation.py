@@ -1,4 +1,5 @@
-"""Evaluating a run (``engine.evaluation``): an interrupted evaluation never leaves a half-filled render folder."""
+"""Evaluating a run (``engine.evaluation``): an interrupted evaluation never leaves a half-filled render folder, and
+never removes a folder it did not make."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import pytest
 from fourierf_plugin.engine.evaluation import evaluate
 from fourierf_plugin.engine.loading import LoadedRun, load_run
 from fourierf_plugin.method_configs import config_registry
+from fourierf_plugin.utils.errors import UserError
 from tests.helpers import TINY_TEST_VIEWS, train_tiny
 
 
@@ -36,10 +38,22 @@ def test_an_interrupted_evaluation_leaves_no_render_folder_and_the_next_one_comp
     with pytest.raises(Stop):
         evaluate(run, "test", render_dir=renders, on_view=stop_after_two)
     assert not renders.exists(), "a render folder must only ever hold a complete set"
-    assert len(list(renders.with_name("renders.partial").glob("*.png"))) == 2
+    assert not list(tmp_path.iterdir()), "the interrupted evaluation removes the partial folder it made"
 
     report = evaluate(run, "test", render_dir=renders)
     assert len(list(renders.glob("*.png"))) == TINY_TEST_VIEWS == report["num_views"]
-    assert not renders.with_name("renders.partial").exists()
-    again = evaluate(run, "test", render_dir=renders)  # an earlier complete set is replaced by the same renders
+    assert [p.name for p in tmp_path.iterdir()] == ["renders"]
+    with pytest.raises(UserError, match="--overwrite"):
+        evaluate(run, "test", render_dir=renders)  # an earlier set is kept unless the caller says to replace it
+    again = evaluate(run, "test", render_dir=renders, overwrite=True)
     assert sorted(p.stem for p in renders.glob("*.png")) == sorted(item["name"] for item in again["per_image"])
+    assert [p.name for p in tmp_path.iterdir()] == ["renders"]
+
+
+def test_an_evaluation_never_removes_a_folder_it_did_not_make(run: LoadedRun, tmp_path: Path) -> None:
+    """A folder beside the renders, named like a temporary one, is the user's: it stays."""
+    theirs = tmp_path / "renders.partial"
+    theirs.mkdir()
+    (theirs / "notes.txt").write_text("keep")
+    evaluate(run, "test", render_dir=tmp_path / "renders")
+    assert (theirs / "notes.txt").read_text() == "keep"

@@ -142,6 +142,19 @@ def plain_file(tmp: Path, _: Path) -> list[str]:
     return []
 
 
+def existing_report(tmp: Path) -> list[str]:
+    """Puts a file where the eval report goes; adds no arguments."""
+    write(tmp / "eval.json", "{}")
+    return []
+
+
+def folder_of_notes(tmp: Path) -> list[str]:
+    """Puts a user's folder with a note in it where the renders go; adds no arguments."""
+    (tmp / "mine").mkdir()
+    write(tmp / "mine" / "notes.txt", "keep me")
+    return []
+
+
 def moved_scene(payload: dict, where: Path) -> None:
     payload["config"]["pipeline"]["datamanager"]["dataparser"]["data"] = str(where)
 
@@ -496,6 +509,32 @@ CASES: dict[str, Case] = {
         on_run(["--load-config", "{config}", "--output-path", "{tmp}/file.txt/eval.json"], extra=plain_file),
         ("cannot write to", "file.txt", "--output-path"),
     ),
+    "eval: an output path that is a folder": Case(
+        "eval",
+        on_run(["--load-config", "{config}", "--output-path", "{tmp}", "--render-dir", "none"]),
+        ("--output-path", "is a folder", "eval.json"),
+    ),
+    "eval: an existing output path": Case(
+        "eval",
+        on_run(EVAL, extra=lambda tmp, _: existing_report(tmp)),
+        ("--output-path", "already exists", "--overwrite"),
+    ),
+    "eval: a render dir holding files": Case(
+        "eval",
+        on_run(
+            ["--load-config", "{config}", "--output-path", "{tmp}/eval.json", "--render-dir", "{tmp}/mine"],
+            extra=lambda tmp, _: folder_of_notes(tmp),
+        ),
+        ("--render-dir", "not empty", "--overwrite"),
+    ),
+    "eval: a render dir of other files even with --overwrite": Case(
+        "eval",
+        on_run(
+            ["--load-config", "{config}", "--output-path", "{tmp}/eval.json", "--render-dir", "{tmp}/mine"],
+            extra=lambda tmp, _: [*folder_of_notes(tmp), "--overwrite"],
+        ),
+        ("--render-dir", "notes.txt", "only a folder of renders"),
+    ),
     "eval: zero threads": Case("eval", on_run(EVAL, extra=lambda tmp, _: ["--threads", "0"]), ("--threads 0",)),
     "export: zero threads": Case("export", on_run(EXPORT, extra=lambda tmp, _: ["--threads", "0"]), ("--threads 0",)),
     "render: a frame larger than the memory": Case(
@@ -515,6 +554,18 @@ CASES: dict[str, Case] = {
         "train",
         lambda tmp, _: train_on(capture(tmp, lambda root: (root / "images" / "frame_00002.png").unlink()), tmp, *NS),
         ("transforms.json, frame 2", "not found"),
+    ),
+    "train: several transforms.json images missing": Case(
+        "train",
+        lambda tmp, _: train_on(
+            capture(tmp, lambda root: [(root / "images" / f"frame_{i:05d}.png").unlink() for i in (2, 5, 7)]), tmp, *NS
+        ),
+        ("3 of 10 frames", "frame 2 (images/frame_00002.png)", "frame 7", "--skip-missing-images True"),
+    ),
+    "train: one photo named by two frames with different cameras": Case(
+        "train",
+        lambda tmp, _: train_on(capture(tmp, frame_keys(4, file_path="images/frame_00003.png")), tmp, *NS),
+        ("frames 3 and 4 (images/frame_00003.png)", "different cameras", "keep one frame per photo"),
     ),
     "train: unknown camera_model": Case(
         "train",

@@ -61,11 +61,11 @@ def test_effect_flags_override_the_scene_and_the_rest_is_declared() -> None:
 
 
 def test_accel_flags_land_in_the_model_accel_config() -> None:
-    config = parse_args(["fourierf-vm", "--pipeline.model.accel.backend", "reference",
+    config = parse_args(["fourierf-vm", "--pipeline.model.accel.backend", "reference-grid-ops",
                          "--pipeline.model.accel.decoder-precision", "float32",
                          "--pipeline.model.accel.render-chunk-rays", "512"])  # fmt: skip
     accel = config.pipeline.model.accel
-    assert (accel.backend, accel.decoder_precision, accel.render_chunk_rays) == ("reference", "float32", 512)
+    assert (accel.backend, accel.decoder_precision, accel.render_chunk_rays) == ("reference-grid-ops", "float32", 512)
     assert parse_args(["fourierf-vm"]).pipeline.model.accel.backend == "accelerated"
 
 

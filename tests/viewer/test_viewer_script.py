@@ -6,10 +6,12 @@ import json
 import shutil
 import socket
 import sys
+import time
 from pathlib import Path
 
 from fourierf_plugin.scripts.cli import EXIT_USER_ERROR
 from fourierf_plugin.scripts.viewer import ViewerConfig, main, serve
+from fourierf_plugin.viewer.server import MESH_EVERY_SECONDS
 from tests.conftest import require_module
 from tests.helpers import cli_exit_code
 
@@ -87,6 +89,7 @@ def test_the_mesh_button_writes_beside_earlier_meshes_without_overwriting(traine
     try:
         handle.view.density_slider.value = 0.5
         first = handle.view.export_mesh()
+        handle.view.clock = lambda: time.perf_counter() + MESH_EVERY_SECONDS  # the next mesh is allowed
         second = handle.view.export_mesh()
     finally:
         handle.stop()

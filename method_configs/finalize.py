@@ -20,6 +20,7 @@ from fourierf_plugin.method_configs.budget import apply_budget_rule
 from fourierf_plugin.method_configs.registry import all_methods
 from fourierf_plugin.method_configs.scene_presets import apply_real_scene_preset, apply_settings
 from fourierf_plugin.method_configs.sizing import run_size
+from fourierf_plugin.method_configs.time_budget import apply_time_budget
 from fourierf_plugin.utils.errors import fail
 
 
@@ -62,12 +63,20 @@ def finalize(config: TrainerConfig, given: frozenset[str] = frozenset()) -> tupl
             notes.append(f"  kept your settings for: {', '.join(kept)}")
     config.scene_preset = preset
     reference = preset_under_scene(all_methods.get(config.method_name), preset)
+    if config.time_budget is not None:  # the budget picks the count, as if typed, before the rules see it
+        given = given | {"max_num_iterations"}
     notes += size_the_run(config, reference, not declared.bounded, given)
-    notes += apply_budget_rule(config, reference, given, declared.background)
-    resolve_tv_decay(config)
-    effects = config.pipeline.effects.resolve(declared)
-    config.pipeline.effects = EffectsConfig.of(effects)
-    notes.append(f"scene effects: {effects.describe()} (the scene declares: {declared.describe()})")
+
+    def finish(run: TrainerConfig) -> list[str]:
+        """The short-run rules, the TV decay and the scene's effects: what depends on the iteration count."""
+        lines = apply_budget_rule(run, reference, given, declared.background)
+        resolve_tv_decay(run)
+        effects = run.pipeline.effects.resolve(declared)
+        run.pipeline.effects = EffectsConfig.of(effects)
+        return [*lines, f"scene effects: {effects.describe()} (the scene declares: {declared.describe()})"]
+
+    notes += apply_time_budget(config, finish, declared.background)
+    notes += finish(config)
     return config, notes
 
 
@@ -98,6 +107,8 @@ def size_the_run(
     views, height, width = train.images.shape[0], train.cameras.height, train.cameras.width
     size = run_size(views, height, width, pick_device(config.device), forward_facing)
     applied, kept = apply_settings(config, pristine, size.settings(), given)
+    if config.time_budget is not None and "max_num_iterations" in kept:  # the budget's, said by its own note
+        kept.remove("max_num_iterations")
     if not applied:
         return []
     note = f"run size for {size.reason}: {', '.join(applied)}"

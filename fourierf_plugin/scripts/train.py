@@ -12,6 +12,7 @@ from fourierf_plugin.engine.trainer import Trainer, TrainerConfig
 from fourierf_plugin.method_configs import AnnotatedMethodUnion, finalize, resume_config
 from fourierf_plugin.method_configs.finalize import ignored_on_resume
 from fourierf_plugin.method_configs.registry import HELP_REGISTRY
+from fourierf_plugin.method_configs.time_budget import parse_duration
 from fourierf_plugin.scripts.cli import run_cli, strip_verbose
 from fourierf_plugin.scripts.observers import build_observers
 from fourierf_plugin.utils.console import get_console
@@ -34,6 +35,8 @@ def given_options(args: list[str]) -> frozenset[str]:
 def build_config(config: TrainerConfig, given: frozenset[str] = frozenset()) -> tuple[TrainerConfig, list[str]]:
     """The finished config of a new run (``finalize``, ``given`` the paths of the typed flags) or the saved one of a
     run to resume, and the notes to print."""
+    if config.time_budget is not None:
+        check_time_budget(config, given)
     if config.load_dir is not None:
         ignored = ignored_on_resume(config)
         if ignored:
@@ -48,6 +51,24 @@ def build_config(config: TrainerConfig, given: frozenset[str] = frozenset()) -> 
         fail("no scene given", "pass --data PATH_TO_SCENE (e.g. --data demo/lego_tiny), or --load-dir RUN to resume")
     check_training_options(config)  # before any file of the scene is read
     return finalize(config, given)
+
+
+def check_time_budget(config: TrainerConfig, given: frozenset[str]) -> None:
+    """``--time-budget`` picks the iteration count of a new run: a UserError with ``--max-num-iterations``, on resume,
+    or for a budget that is no duration."""
+    if config.load_dir is not None:
+        fail(
+            f"--time-budget {config.time_budget} cannot resize a resumed run: it continues with its saved iteration "
+            "count (every schedule is a fraction of it)",
+            f"resume with only --load-dir {config.load_dir}, or start a new run with --time-budget",
+        )
+    if "max_num_iterations" in given:
+        fail(
+            f"--time-budget {config.time_budget} and --max-num-iterations {config.max_num_iterations} both set the "
+            "run's length",
+            "pass one of them: --time-budget picks the iteration count that fits the time",
+        )
+    parse_duration(config.time_budget)  # before any file of the scene is read
 
 
 def main(args: list[str] | None = None) -> None:

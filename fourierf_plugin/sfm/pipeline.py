@@ -1,17 +1,15 @@
 """The structure-from-motion stages in order: features, matching, mapping; the largest model saved as
 ``colmap/sparse/0`` (COLMAP's binary format), the database kept beside it for reruns and inspection.
 
-Progress inside a stage: extraction and matching give no callback, but COLMAP writes each photo's keypoints and each
-block of verified pairs to the database as it goes, so a watcher thread counts those rows (read-only); mapping calls
-back per registered photo.
+Progress inside a stage: extraction and matching give no callback, so they print a heartbeat with the time spent
+(their database is never read while COLMAP writes it: a second copy of SQLite in the process breaks its file locks);
+mapping calls back per registered photo.
 """
 
 from __future__ import annotations
 
 import shutil
-import sqlite3
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 from types import ModuleType
 
@@ -60,20 +58,6 @@ def _database_counts(pycolmap: ModuleType, database: Path) -> tuple[int, int, in
         db.close()
 
 
-def database_rows(database: Path, table: str) -> int | None:
-    """Rows of ``table`` in COLMAP's database read while COLMAP writes it; None when it cannot be read yet."""
-    try:
-        connection = sqlite3.connect(f"file:{database}?mode=ro", uri=True, timeout=0.1)
-    except sqlite3.Error:
-        return None
-    try:
-        return int(connection.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0])
-    except sqlite3.Error:  # no such table yet, or locked for a moment
-        return None
-    finally:
-        connection.close()
-
-
 def run_sfm(
     image_dir: Path, image_names: list[str], colmap_dir: Path, options: SfmOptions, display: StageDisplay
 ) -> SfmOutcome:
@@ -85,8 +69,7 @@ def run_sfm(
     sizes = {image_size(image_dir / name) for name in image_names}
     n = len(image_names)
 
-    keypoint_rows = partial(database_rows, database, "keypoints")
-    with display.stage(f"extracting SIFT features of {n} photos", total=n, unit="photos", poll=keypoint_rows) as stage:
+    with display.stage(f"extracting SIFT features of {n} photos", unit="photos") as stage:
         extract_features(
             pycolmap,
             database,
@@ -101,9 +84,8 @@ def run_sfm(
         stage.detail = f"{keypoints / n:.0f} per photo"
 
     method = resolve_matching(options.matching, n, options.ordered)
-    verified_rows = partial(database_rows, database, "two_view_geometries")
     total_pairs = pair_count(method, n)
-    with display.stage(f"matching features ({method})", total=total_pairs, unit="pairs", poll=verified_rows) as stage:
+    with display.stage(f"matching features ({method}, {total_pairs} pairs)", unit="pairs") as stage:
         match_features(pycolmap, database, method, threads=options.threads, n_images=n)
         pairs = _database_counts(pycolmap, database)[2]
         stage.detail = f"{pairs} verified image pairs"

@@ -95,7 +95,7 @@ def test_the_closing_suggestion_is_a_complete_few_shot_command(processed: Proces
     scene = processed.report.scene
     out = " ".join(processed.stdout.split())
     assert f"fourierf-train fourierf-vm --data {scene} nerfstudio-data --num-views 7" in out  # 8 views, 1 held out
-    assert "✓ extracting SIFT features of 9 photos" in out and "✓ matching features (exhaustive): " in out
+    assert "✓ extracting SIFT features of 9 photos" in out and "✓ matching features (exhaustive, 36 pairs)" in out
 
 
 def test_train_suggestion_offers_only_views_the_training_split_has(tmp_path: Path) -> None:

@@ -3,7 +3,6 @@ counted while it is written (no pycolmap needed: a stand-in module records the o
 
 from __future__ import annotations
 
-import sqlite3
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -12,7 +11,6 @@ import pytest
 from fourierf_plugin.sfm.features import extract_features
 from fourierf_plugin.sfm.mapping import run_incremental_mapping
 from fourierf_plugin.sfm.matching import exhaustive_block_size, match_features, pair_count
-from fourierf_plugin.sfm.pipeline import database_rows
 
 
 class Options(SimpleNamespace):
@@ -84,19 +82,3 @@ def test_pair_counts_are_the_matchers_totals(n: int) -> None:
 def test_block_size_keeps_blocks_small_enough_to_show_progress() -> None:
     assert exhaustive_block_size(8) == 10 and exhaustive_block_size(50) == 10
     assert exhaustive_block_size(120) == 24 and exhaustive_block_size(1000) == 50
-
-
-def test_database_rows_reads_a_database_being_written(tmp_path: Path) -> None:
-    database = tmp_path / "database.db"
-    assert database_rows(database, "keypoints") is None  # not there yet
-    writer = sqlite3.connect(database)
-    writer.execute("PRAGMA journal_mode=WAL")  # as COLMAP opens it
-    writer.execute("CREATE TABLE keypoints (image_id INTEGER)")
-    writer.executemany("INSERT INTO keypoints VALUES (?)", [(1,), (2,)])
-    writer.commit()
-    writer.execute("INSERT INTO keypoints VALUES (3)")  # an open transaction: not counted yet
-    assert database_rows(database, "keypoints") == 2
-    assert database_rows(database, "two_view_geometries") is None
-    writer.commit()
-    assert database_rows(database, "keypoints") == 3
-    writer.close()

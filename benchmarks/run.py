@@ -1,0 +1,292 @@
+"""The suite's runner: trains and evaluates points of ``suite.toml`` and appends one JSONL row for each.
+
+A point is (method, scene, protocol, setting, seed). Each run trains with ``fourierf-train`` (the budget rule off, so
+it has exactly its setting's values), then ``fourierf-eval`` scores it on the test and the val views. Stages:
+
+    python benchmarks/run.py sweep  --protocol cpu-800 mid-3000 --scene lego fern  # every setting, first seed
+    python benchmarks/run.py seeds  --protocol cpu-800 mid-3000 --scene lego fern  # the val choice, later seeds
+    python benchmarks/run.py seeds  --protocol mid-3000 --scene lego --seeds 1     # one later seed at a time
+    python benchmarks/run.py curve  --scene fern     # cpu-3000, a checkpoint every 500 iterations evaluated
+    python benchmarks/run.py sweep  --only S --again "threads not recorded"  # run recorded points again
+    python benchmarks/run.py merge  --rows lane2/results.jsonl               # rows run elsewhere
+    python benchmarks/report.py                                              # the BENCHMARKS.md section
+
+``--device cuda --jobs 4`` runs four trainings at once on one GPU. GPU runs are not bit-reproducible (grid_sample's
+CUDA backward accumulates with atomics), nor is a CPU run on more than one thread (parallel kernels sum in a varying
+order); on one thread, the default, a CPU run is. Where a key is run again (``--again NOTE``), its earlier row moves
+to ``repeats.jsonl`` beside the results with NOTE as its ``repeat`` note, and the report sets both side by side.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import threading
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+from harness import (
+    QUALITY_RESULTS,
+    REPEATS,
+    REPO,
+    Run,
+    Suite,
+    applies,
+    chosen_setting,
+    evaluate,
+    load_results,
+    load_suite,
+    point_run,
+    rows_by,
+    save_results,
+    setting_flags,
+    train_and_eval,
+)
+
+SUITE = load_suite()
+Point = tuple[str, str, str, Run]
+"""(scene, protocol, setting, run)."""
+
+
+def execute(point: Point, args: argparse.Namespace, suite: Suite = SUITE) -> dict:
+    scene, protocol, setting, run = point
+    extra = [*suite.protocols[protocol].flags(), "--device", args.device, "--budget-rule", "False",
+             *setting_flags(setting)]  # fmt: skip
+    every = suite.curve_every
+    if args.stage == "curve":  # keep a checkpoint every ``curve_every`` iterations (the later flag wins)
+        extra += ["--steps-per-save", str(every), "--keep-checkpoints", str(run.iters // every + 1)]
+    data = args.data / suite.scenes[scene]["path"]
+    lpips, work = args.lpips, args.work / scene
+    row = train_and_eval(run, data, suite.parser_args(scene, protocol), work, lpips, scene, extra, args.threads)
+    row |= evaluate(Path(row["run_dir"]), run.key, work, lpips, split="val", threads=args.threads)
+    if args.stage == "curve":
+        row["curve"] = [
+            *curve_points(Path(row["run_dir"]), run, work, lpips, args.threads),
+            [run.iters, row["val_psnr"], row["psnr"]],
+        ]
+    return row | {"scene": scene, "protocol": protocol, "setting": setting, "device": args.device}
+
+
+def curve_points(run_dir: Path, run: Run, work: Path, lpips: Path, threads: int | None) -> list[list[float]]:
+    """[step, val PSNR, test PSNR] of every checkpoint before the last (the row itself holds the last)."""
+    points = []
+    for ckpt in sorted((run_dir / "checkpoints").glob("step-*.ckpt")):
+        step = int(ckpt.stem.split("-")[-1])
+        if step >= run.iters:
+            continue
+        key = f"{run.key}.step{step}"
+        val = evaluate(run_dir, key, work, lpips, split="val", checkpoint=ckpt, threads=threads)["val_psnr"]
+        points.append([step, val, evaluate(run_dir, key, work, lpips, checkpoint=ckpt, threads=threads)["psnr"]])
+    return points
+
+
+def run_all(plan: Sequence[Point], args: argparse.Namespace) -> None:
+    """Run what is not yet recorded, ``--jobs`` at a time; each finished row is appended at once."""
+    path = args.results
+    done = {} if args.again else load_results(path)
+    todo = [p for p in plan if f"{p[0]}/{p[3].key}" not in done]
+    todo.sort(key=lambda p: (-p[3].iters, p[0] != "fern"))  # longest first: the pool ends on short runs
+    lock = threading.Lock()
+
+    def one(point: Point) -> None:
+        scene, run = point[0], point[3]
+        try:
+            row = execute(point, args)
+        except RuntimeError as err:  # the log's end says why; the other runs go on
+            logs = sorted((args.work / scene).glob(f"{run.key}*.log"))
+            tail = "\n".join(logs[-1].read_text().splitlines()[-15:]) if logs else ""
+            print(f"FAILED {scene}/{run.key}: {err}\n{tail}", flush=True)
+            return
+        row["key"] = f"{scene}/{run.key}"
+        with lock:
+            record(path, row, args.again)
+        print(f"{row['key']}: val {row['val_psnr']:.2f}  train {row['train_seconds']:.0f}s", flush=True)
+
+    print(f"{len(todo)} runs to do ({len(plan) - len(todo)} recorded)", flush=True)
+    with ThreadPoolExecutor(max(1, args.jobs)) as pool:
+        list(pool.map(one, todo))
+
+
+def record(path: Path, row: dict, again: str | None = None) -> None:
+    """Append a finished row. Run ``--again``, a recorded key's earlier row first moves to ``repeats.jsonl`` with the
+    note (the results keep one row a key), so nothing recorded is lost and the report can set the two side by side."""
+    held = load_results(path) if again else {}
+    earlier = held.pop(row["key"], None)
+    if earlier is not None:
+        with path.with_name(REPEATS).open("a") as fh:
+            fh.write(json.dumps(earlier | {"repeat": again}) + "\n")
+        save_results(path, held)
+    with path.open("a") as fh:
+        fh.write(json.dumps(row) + "\n")
+
+
+ROW_FIELDS = ("key", "scene", "protocol", "method", "setting", "seed", "val_psnr", "psnr")
+"""What the report reads of a row: a row merged from elsewhere must carry each."""
+
+
+def read_rows(source: Path, suite: Suite = SUITE) -> list[dict]:
+    """The rows of a results file written elsewhere (another results path, the device machine), checked for what the
+    report reads; ValueError names the file, the line and the fix."""
+    if not source.is_file():
+        raise ValueError(f"{source}: no such results file; pass the --results path a sweep, seeds or curve stage wrote")
+    rows = []
+    for number, line in enumerate(source.read_text().splitlines(), start=1):
+        if not line.strip():
+            continue
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError as err:
+            raise ValueError(f"{source}:{number}: not a JSON row ({err.msg}); one finished run a line") from None
+        missing = [f for f in ROW_FIELDS if not isinstance(row, dict) or f not in row]
+        if missing:
+            raise ValueError(f"{source}:{number}: a row without {', '.join(missing)}; merge only rows run.py wrote")
+        if row["protocol"] not in suite.protocols or row["method"] not in suite.methods:
+            what = f"protocol {row['protocol']!r} or method {row['method']!r}"
+            known = f"{', '.join(suite.protocols)}; {', '.join(suite.methods)}"
+            raise ValueError(f"{source}:{number}: {what} is not the suite's ({known})")
+        rows.append(row)
+    return rows
+
+
+def merge(path: Path, sources: Sequence[Path], again: str | None) -> list[str]:
+    """Record the rows of ``sources`` in the results at ``path``, as ``run_all`` records a finished run: a recorded key
+    is skipped, or, ``again``, its earlier row moves to the repeats with that note. Every source is read and checked
+    before anything is written. Why: runs trained side by side as separate processes (or on the device machine) write
+    their own results files, and one process must move rows between the files."""
+    if any(source.resolve() == path.resolve() for source in sources):
+        raise ValueError(f"{path}: the results cannot be merged into themselves; pass the other run's --results file")
+    rows = [row for source in sources for row in read_rows(source)]
+    held = load_results(path)
+    lines = []
+    for row in rows:
+        if row["key"] in held and again is None:
+            lines.append(f"{row['key']}: recorded, skipped (--again NOTE keeps this row, the earlier to the repeats)")
+            continue
+        record(path, row, again)
+        held[row["key"]] = row
+        threads = row.get("train_threads", "?")
+        lines.append(f"{row['key']}: val {row['val_psnr']:.2f}  test {row['psnr']:.2f}  (threads {threads})")
+    return lines
+
+
+def point(scene: str, protocol: str, method: str, setting: str, seed: int, suite: Suite = SUITE) -> Point:
+    return scene, protocol, setting, point_run(method, suite.protocols[protocol], setting, seed)
+
+
+def sweep_plan(args: argparse.Namespace, suite: Suite = SUITE) -> list[Point]:
+    return [
+        point(scene, p, method, setting, suite.seeds[0])
+        for p in args.protocol
+        for scene in args.scene
+        for setting in suite.settings[scene]
+        for method in args.methods or suite.methods
+        if applies(method, setting) and scene in suite.protocols[p].scenes and (not args.only or setting in args.only)
+    ]
+
+
+def seeds_plan(args: argparse.Namespace, suite: Suite = SUITE) -> list[Point]:
+    results = load_results(args.results)
+    seeds = args.seeds or suite.seeds[1:]
+    plan = []
+    for p in args.protocol:
+        for scene in args.scene:
+            for method in args.methods or suite.methods:
+                if args.only:  # the seeds of named settings, so that val can choose on more than one seed
+                    settings = [s for s in args.only if applies(method, s)]
+                else:
+                    best = chosen_setting(rows_by(results, scene, p, method), suite.seeds)
+                    if best is None:
+                        sys.exit(f"error: no sweep result for {scene} {p} {method}; run the sweep stage first")
+                    settings = [best]
+                plan += [point(scene, p, method, s, seed) for s in settings for seed in seeds]
+    return plan
+
+
+def curve_plan(args: argparse.Namespace, suite: Suite = SUITE) -> list[Point]:
+    """Each method at ``--only``'s settings, else at the val choice of the 800-iteration protocol of the same sizes
+    (the protocol's ``curve_of``), first seed."""
+    results = load_results(args.results)
+    plan = []
+    for p in args.protocol:
+        base = suite.protocols[p].curve_of
+        if base is None:
+            curves = [name for name, protocol in suite.protocols.items() if protocol.curve_of]
+            sys.exit(f"error: the curve stage runs {' or '.join(curves)}, not {p}")
+        for scene in args.scene:
+            for method in args.methods or suite.methods:
+                best = chosen_setting(rows_by(results, scene, base, method), suite.seeds)
+                settings = [s for s in args.only if applies(method, s)] if args.only else [best] if best else []
+                if not settings and not args.only:  # --only with curriculum settings alone: tensorf-vm has none
+                    sys.exit(f"error: no {base} sweep result for {scene} {method}; run the sweep or pass --only")
+                plan += [point(scene, p, method, s, suite.seeds[0]) for s in settings]
+    return plan
+
+
+def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("stage", choices=("sweep", "seeds", "curve", "merge"))
+    ap.add_argument("--protocol", nargs="+", choices=tuple(suite.protocols), default=None,
+                    help="default: cpu-800 mid-3000 mid-800 (the curve stage: cpu-3000)")  # fmt: skip
+    ap.add_argument("--scene", nargs="+", choices=tuple(suite.settings), default=list(suite.settings))
+    ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data",
+                    help="folder holding blender/lego and llff/fern")  # fmt: skip
+    ap.add_argument("--lpips", type=Path, default=REPO.parent / "shared" / "lpips" / "lpips_alex_v0.1.pth")
+    ap.add_argument("--work", type=Path, default=REPO / "outputs" / "bench_quality", help="run folders and logs")
+    ap.add_argument("--results", type=Path, default=QUALITY_RESULTS,
+                    help="one row per finished run (the report reads it; finished runs are skipped)")  # fmt: skip
+    ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
+    ap.add_argument("--only", nargs="+", default=None, help="sweep only these settings (names from suite.toml)")
+    ap.add_argument("--methods", nargs="+", choices=suite.methods, default=None, help="run only these methods")
+    ap.add_argument("--seeds", nargs="+", type=int, choices=suite.seeds[1:], default=None,
+                    help="the seeds stage runs only these of the later seeds (default: all)")  # fmt: skip
+    ap.add_argument("--jobs", type=int, default=1, help="trainings at once")
+    ap.add_argument("--threads", type=int, default=1,
+                    help="CPU threads per training and its evaluations (1: a CPU run is bit-reproducible; more are "
+                         "faster alone, but sum floats in a varying order)")  # fmt: skip
+    ap.add_argument("--again", metavar="NOTE", default=None,
+                    help="run the plan's recorded runs again too; each earlier row moves to repeats.jsonl with NOTE "
+                         "(what differed then, e.g. 'threads not recorded')")  # fmt: skip
+    ap.add_argument("--rows", nargs="+", type=Path, default=None, metavar="FILE",
+                    help="merge: results files written elsewhere (another --results, the device)")  # fmt: skip
+    args = ap.parse_args(argv)
+    if args.protocol is None:
+        args.protocol = ["cpu-3000"] if args.stage == "curve" else ["cpu-800", "mid-3000", "mid-800"]
+    if args.threads < 1:
+        sys.exit(f"error: --threads {args.threads} must be at least 1; pass e.g. --threads 2, or omit it for 1")
+    if args.again is not None and not args.again.strip():
+        sys.exit("error: --again NOTE reruns the runs of a sweep, seeds or curve stage (or merges runs of recorded "
+                 "keys) and needs a note saying what differed then, e.g. --again 'threads not recorded'")  # fmt: skip
+    if (args.rows is None) != (args.stage != "merge"):
+        sys.exit("error: --rows FILE ... goes with the merge stage, and the merge stage needs it: "
+                 "run.py merge --rows other/results.jsonl")  # fmt: skip
+    if args.seeds and args.stage != "seeds":
+        sys.exit(f"error: --seeds picks the later seeds of the seeds stage; drop it for the {args.stage} stage")
+    known = {name for scene in args.scene for name in suite.settings[scene]}
+    unknown = sorted(set(args.only or ()) - known)
+    if unknown:
+        scenes = " ".join(args.scene)
+        sys.exit(f"error: --only {' '.join(unknown)}: no such setting for {scenes}; known: {sorted(known)}")
+    return args
+
+
+def main() -> None:
+    args = parse_args()
+    args.work.mkdir(parents=True, exist_ok=True)
+    args.results.parent.mkdir(parents=True, exist_ok=True)
+    if args.stage == "merge":
+        try:
+            print("\n".join(merge(args.results, args.rows, args.again)))
+        except ValueError as err:
+            sys.exit(f"error: {err}")
+        return
+    for scene in args.scene:
+        if not (args.data / SUITE.scenes[scene]["path"]).exists():
+            sys.exit(f"error: {scene} not found under {args.data}; pass --data FOLDER")
+    plans = {"sweep": sweep_plan, "seeds": seeds_plan, "curve": curve_plan}
+    run_all(plans[args.stage](args), args)
+
+
+if __name__ == "__main__":
+    main()

@@ -31,8 +31,9 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+from harness import machine_description, update_benchmarks_md
+
 from fourierf_plugin.bench import coordinator, results
-from fourierf_plugin.bench.protocol import machine_description, update_benchmarks_md
 from fourierf_plugin.scripts.bench import BenchConfig, run_bench
 
 REPO = Path(__file__).resolve().parents[1]

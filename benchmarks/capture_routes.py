@@ -22,7 +22,7 @@ import json
 import sys
 from pathlib import Path
 
-from fourierf_plugin.bench.protocol import (
+from harness import (
     BIN,
     Run,
     load_results,
@@ -32,6 +32,7 @@ from fourierf_plugin.bench.protocol import (
     train_and_eval,
     update_benchmarks_md,
 )
+
 from fourierf_plugin.synthetic import default_scene
 from fourierf_plugin.synthetic.nerfstudio_capture import PHONE_LENS, write_nerfstudio_capture
 

@@ -1,4 +1,5 @@
-"""Shared pieces of the scripts in ``benchmarks/``: timed child processes, the results file, BENCHMARKS.md sections.
+"""What the scripts in ``benchmarks/`` share: timed child processes, results files, BENCHMARKS.md sections, and
+the suite (``suite.toml``) with the setting names it is written in.
 
 Each run is its own process (`fourierf-train`, then `fourierf-eval`), timed by wall clock with its peak RSS read
 from the child's rusage. Results are appended to a JSONL file (finished runs are skipped on a re-run; delete a line
@@ -10,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import re
 import shutil
 import sys
 from collections.abc import Callable, Sequence
@@ -17,12 +19,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import tomllib
 
 from fourierf_plugin.bench.phases import log_records, read_metrics
 from fourierf_plugin.bench.runner import run_timed
 from fourierf_plugin.utils.console import CPU_THREADS_NOTE
 
 BIN = Path(sys.executable).parent
+REPO = Path(__file__).resolve().parents[1]
 GRID_FLAGS = [
     "--pipeline.datamanager.rays-per-batch", "1024",
     "--pipeline.model.field.n-voxels-init", str(64**3),
@@ -241,3 +245,184 @@ def cpu_and_cores() -> str:
     except OSError:
         pass
     return f"{cpu}, {os.cpu_count()} cores"
+
+
+# The suite: methods × scenes × protocols × settings × seeds, read from suite.toml.
+
+SUITE_FILE = Path(__file__).with_name("suite.toml")
+QUALITY_RESULTS = REPO / "benchmarks" / "results" / "quality" / "results.jsonl"
+REPEATS = "repeats.jsonl"
+"""Beside the results: other runs of a key that was run again (the results keep one row a key), each with a
+``repeat`` note that says what that run was (on a GPU or on more than one CPU thread a run is not bit-reproducible)."""
+
+
+@dataclass(frozen=True)
+class Protocol:
+    name: str
+    iters: int
+    rays: int
+    grid: tuple[int, int]
+    """The grid's initial and final side."""
+    lego_downscale: int
+    scenes: tuple[str, ...] = ("lego", "fern")
+    curve_of: str | None = None
+    """The protocol of the same sizes at 800 iterations, whose val choice a curve along this one trains."""
+
+    def flags(self) -> list[str]:
+        return [
+            "--pipeline.datamanager.rays-per-batch", str(self.rays),
+            "--pipeline.model.field.n-voxels-init", str(self.grid[0] ** 3),
+            "--pipeline.model.field.n-voxels-final", str(self.grid[1] ** 3),
+            "--steps-per-save", "100000",
+        ]  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Suite:
+    methods: tuple[str, ...]
+    seeds: tuple[int, ...]
+    protocols: dict[str, Protocol]
+    scenes: dict[str, dict]
+    settings: dict[str, tuple[str, ...]]
+    targets: tuple[dict, ...]
+    rule_along_the_budget: dict[str, dict[str, str]]
+    grids: tuple[dict, ...]
+    curve_every: int
+
+    def parser_args(self, scene: str, protocol: str) -> list[str]:
+        args = list(self.scenes[scene]["parser"])
+        if args[0] == "blender-data":
+            args[1:1] = ["--downscale", str(self.protocols[protocol].lego_downscale)]
+        return args
+
+
+def load_suite(path: Path = SUITE_FILE) -> Suite:
+    data = tomllib.loads(path.read_text())
+    protocols = {
+        name: Protocol(name, p["iters"], p["rays"], tuple(p["grid"]), p["lego_downscale"],
+                       tuple(p.get("scenes", ("lego", "fern"))), p.get("curve_of"))
+        for name, p in data["protocols"].items()
+    }  # fmt: skip
+    return Suite(
+        tuple(data["methods"]), tuple(data["seeds"]), protocols, data["scenes"],
+        {scene: tuple(names) for scene, names in data["settings"].items()}, tuple(data["targets"]),
+        data["rule_along_the_budget"], tuple(data["grids"]), data["curve_every"],
+    )  # fmt: skip
+
+
+RAMP = "--pipeline.model.fourier.ramp-fraction"
+F_FINAL, F_FINAL_COLOR = "--pipeline.model.fourier.f-final", "--pipeline.model.fourier.f-final-color"
+F0_DENSITY, F0_COLOR = "--pipeline.model.fourier.f0-density", "--pipeline.model.fourier.f0-color"
+FNM, FNM_FROM = "--pipeline.model.floaters-gradient-scaling", "--pipeline.model.floaters-gradient-scaling-from"
+L1_INITIAL, L1_REST = "--pipeline.model.l1-weight-initial", "--pipeline.model.l1-weight-rest"
+BACKGROUND = "--pipeline.effects.background"
+OCCUPANCY = "--pipeline.model.occupancy-update-fractions"
+TOKENS: dict[str, list[str]] = {
+    "preset": [],  # the preset as the trainer builds it (the budget rule off, as for every setting)
+    "nodecay": ["--optimizer.lr-decay-ratio", "1.0"],
+    "tvconst": ["--pipeline.model.tv-decay-ratio", "1.0"],
+    "occ": ["--pipeline.effects.occlusion-regularization", "True"],
+    "fnm": [FNM, "True"],  # Floaters-No-More's gradient scaling
+    "fnmlate": [FNM, "True", FNM_FROM, "0.2667"],  # ... from the step a 3000-iteration run's band is open (step 800)
+    "bgrand": [BACKGROUND, "random", "--pipeline.model.random-background-from", "0"],  # from the first step
+    "bgwarm": [BACKGROUND, "random"],  # from the step after the first occupancy update, white before
+    "mirror": ["--pipeline.model.fourier.boundary", "mirror"],
+    "l1off": [L1_INITIAL, "0", L1_REST, "0"],
+    "l1late": [L1_INITIAL, "0"],  # no density L1 before the first occupancy update
+    "plain": ["--pipeline.model.field.revive-dead-density", "False"],  # TensoRF's ReLU for the density
+    "zfree": ["--pipeline.model.fourier.density-axes", "0", "1"],  # the density's band on x and y only
+    "alphamask0.25": [OCCUPANCY, "0.25"],  # one occupancy update, at 25 % of the run
+    "alphamask0.3": [OCCUPANCY, "0.3", "0.5"],  # two, at 30 % and 50 %
+    "up0.01": ["--pipeline.model.field.upsample-fractions", "0.01"],  # the final grid from 1 % of the run on
+}
+"""The tokens of a setting's name that stand for fixed flags."""
+VALUED: dict[str, Callable[[str], list[str]]] = {  # a prefix and a number: ``tv4``, ``f0d0.1``
+    "wd": lambda v: ["--optimizer.weight-decay", v],
+    "lr": lambda v: ["--optimizer.lr-grids", v],
+    "tv": lambda v: ["--pipeline.model.tv-weight-density", v, "--pipeline.model.tv-weight-appearance", v],
+    "ramp": lambda v: [RAMP, v],  # the fraction of the run over which the band opens
+    "f": lambda v: [F0_DENSITY, v, F0_COLOR, v],  # both grids' first band
+    "f0d": lambda v: [F0_DENSITY, v],
+    "f0c": lambda v: [F0_COLOR, v],
+    "ffinal": lambda v: [F_FINAL, v],  # the band's final cutoff
+    "ffinald": lambda v: [F_FINAL, v, F_FINAL_COLOR, "1.0"],  # ... of the geometry alone
+    "ffinalc": lambda v: [F_FINAL_COLOR, v],  # ... of the colour alone
+    "comp": lambda v: [  # density components per plane/line group, three times as many for appearance
+        "--pipeline.model.field.density-components", *[v] * 3,
+        "--pipeline.model.field.appearance-components", *[str(3 * int(v))] * 3,
+    ],
+    "g": lambda v: [  # the final grid side, from half of it
+        "--pipeline.model.field.n-voxels-init", str((int(v) // 2) ** 3),
+        "--pipeline.model.field.n-voxels-final", str(int(v) ** 3),
+    ],
+    "revive": lambda v: ["--pipeline.model.field.revive-patience", v],  # dark batches before a dead density revives
+    "fnmfrom": lambda v: [FNM_FROM, v],
+    "occ": lambda v: ["--pipeline.model.occlusion-weight", v],  # FreeNeRF's occlusion term
+    "ds": lambda v: ["--pipeline.model.depth-smoothness-weight", v],  # RegNeRF's depth smoothness
+    "dist": lambda v: ["--pipeline.model.distortion-weight", v],  # mip-NeRF 360's distortion loss
+    "ent": lambda v: ["--pipeline.model.entropy-weight", v],  # InfoNeRF's ray entropy
+    "u": lambda v: ["--pipeline.model.entropy-unseen-rays", v],  # ... on this many unseen rays
+}  # fmt: skip
+"""The tokens that are a prefix and a number."""
+CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "mirror", "zfree")
+"""Settings that only change the curriculum: tensorf-vm (masks off) would repeat its run, so it skips them."""
+
+
+def setting_flags(setting: str) -> list[str]:
+    """The ``fourierf-train`` flags a setting's name stands for (later flags win over the protocol's own sizes)."""
+    flags = []
+    for token in setting.split("-"):
+        if token in TOKENS:
+            flags += TOKENS[token]
+            continue
+        match = re.fullmatch(r"([a-z0-9]*?[a-z])(\d+(?:\.\d+)?)", token)
+        if match is None or match[1] not in VALUED:
+            known = f"{', '.join(TOKENS)}, or one of {', '.join(VALUED)} and a number"
+            raise ValueError(f"{setting}: no such token {token!r}; a token is {known}")
+        flags += VALUED[match[1]](match[2])
+    return flags
+
+
+def applies(method: str, setting: str) -> bool:
+    return method != "tensorf-vm" or not any(part.startswith(CURRICULUM_ONLY) for part in setting.split("-"))
+
+
+def point_run(method: str, protocol: Protocol, setting: str, seed: int) -> Run:
+    """One point of the suite as a run (its key, under the scene, is the point's key in the results)."""
+    return Run(method, protocol.iters, seed, f"{protocol.name}_{setting}")
+
+
+def read_repeats(path: Path) -> list[dict]:
+    """Every row of ``repeats.jsonl``: unlike the results, a key may hold several (one a rerun)."""
+    if not path.exists():
+        return []
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def rows_by(results: dict[str, dict], scene: str, protocol: str, method: str) -> dict[str, list[dict]]:
+    """Recorded rows of one (scene, protocol, method), grouped by setting."""
+    out: dict[str, list[dict]] = {}
+    for r in results.values():
+        if (r["scene"], r["protocol"], r["method"]) == (scene, protocol, method):
+            out.setdefault(r["setting"], []).append(r)
+    return out
+
+
+def val_by_seed(rows: list[dict], seeds: Sequence[int]) -> dict[int, float]:
+    """A setting's val PSNR per seed of ``seeds`` that it ran on, in their order (one row a seed: the key names it)."""
+    recorded = {r["seed"]: r["val_psnr"] for r in rows}
+    return {seed: recorded[seed] for seed in seeds if seed in recorded}
+
+
+def chosen_setting(groups: dict[str, list[dict]], seeds: Sequence[int]) -> str | None:
+    """The setting with the best mean validation PSNR over ``seeds`` among those run on every seed (the seeds stage
+    runs the sweep's leaders), else the best validation PSNR of the first seed (the sweep's seed).
+
+    Why the mean where there is one: one seed's val PSNR moves from seed to seed by more than many settings differ,
+    so the best of many single-seed settings is mostly the luckiest."""
+    seeded = {s: vals for s, rows in groups.items() if len(vals := val_by_seed(rows, seeds)) == len(seeds)}
+    if seeded:
+        return max(seeded, key=lambda s: float(np.mean(list(seeded[s].values()))))
+    first = {s: [r for r in rows if r["seed"] == seeds[0]] for s, rows in groups.items()}
+    scored = {s: rows[0]["val_psnr"] for s, rows in first.items() if rows}
+    return max(scored, key=scored.__getitem__) if scored else None

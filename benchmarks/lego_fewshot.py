@@ -14,7 +14,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from fourierf_plugin.bench.protocol import (
+from harness import (
     Run,
     load_results,
     results_table,

@@ -22,8 +22,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
-from fourierf_plugin.bench.protocol import (
+from harness import (
     BIN,
     Run,
     evaluate,

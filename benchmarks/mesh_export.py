@@ -14,8 +14,7 @@ import time
 from pathlib import Path
 
 import trimesh
-
-from fourierf_plugin.bench.protocol import (
+from harness import (
     BIN,
     Run,
     load_results,
@@ -24,6 +23,7 @@ from fourierf_plugin.bench.protocol import (
     section_head,
     update_benchmarks_md,
 )
+
 from fourierf_plugin.engine.loading import load_run
 from fourierf_plugin.exporter.marching_cubes import export_field_mesh
 from fourierf_plugin.synthetic import default_scene, load_scene, sample_surface, write_blender_dataset

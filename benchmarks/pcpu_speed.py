@@ -28,9 +28,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
-from fourierf_plugin.bench import phases as ph
-from fourierf_plugin.bench.protocol import (
+from harness import (
     Run,
     evaluate,
     load_results,
@@ -40,6 +38,8 @@ from fourierf_plugin.bench.protocol import (
     train_and_eval,
     update_benchmarks_md,
 )
+
+from fourierf_plugin.bench import phases as ph
 
 REPO = Path(__file__).resolve().parents[1]
 

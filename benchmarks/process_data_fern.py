@@ -20,8 +20,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+from harness import section_head, update_benchmarks_md
 
-from fourierf_plugin.bench.protocol import section_head, update_benchmarks_md
 from fourierf_plugin.data.nerfstudio_writer import capture_from_llff
 from fourierf_plugin.scripts.process_data import main as process_data
 from fourierf_plugin.sfm.alignment import pose_errors

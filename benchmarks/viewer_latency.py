@@ -40,8 +40,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+from harness import BIN, GRID_FLAGS, section_head, update_benchmarks_md
 
-from fourierf_plugin.bench.protocol import BIN, GRID_FLAGS, section_head, update_benchmarks_md
 from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.scripts.viewer import ViewerConfig, ViewerHandle, serve
 from fourierf_plugin.viewer.headless import CHROMIUM, CHROMIUM_ARGS

@@ -26,7 +26,7 @@ REQUIRED = [
     "fourierf_plugin/field_components/fourier.py",
     "fourierf_plugin/accel/__init__.py",
     "fourierf_plugin/accel/ops.py",
-    "fourierf_plugin/bench/protocol.py",
+    "fourierf_plugin/bench/runner.py",
     "fourierf_plugin/synthetic/__init__.py",
     "fourierf_plugin/scripts/train.py",
     "fourierf_plugin/scripts/eval.py",

@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # Prepare what a lent GPU machine (no network; python3 there has torch, rich, imageio, scikit-image) needs to run
-# benchmarks/pmid.py: wheels of the pure-Python dependencies it lacks (.whl/), a clean export of this project's
-# committed files (.gpu/src), and the scene files the P-CPU/P-MID protocols read (.gpu/data, about 22 MB: lego's
+# benchmarks/run.py: wheels of the pure-Python dependencies it lacks (.whl/), a clean export of this project's
+# committed files (.gpu/src), and the scene files the cpu-800 and mid-3000 protocols read (.gpu/data, about 22 MB: lego's
 # four training views and every 8th val/test view, fern's images_8). Both folders are git-ignored via
 # .git/info/exclude. On the GPU machine, carry ".gpu" and ".whl" and run:
-#   source .gpu/setup.sh && python3 .gpu/src/benchmarks/pmid.py sweep --protocol pmid --device cuda --jobs 4 \
+#   source .gpu/setup.sh && python3 .gpu/src/benchmarks/run.py sweep --protocol mid-3000 --device cuda --jobs 4 \
 #       --threads 2 --data .gpu/data --lpips .gpu/lpips/lpips_alex_v0.1.pth --work /tmp/work
 # and copy /tmp/work/results.jsonl to $OUT. Four trainings at once suit one H100; sixteen time-slice it to a crawl.
 set -euo pipefail

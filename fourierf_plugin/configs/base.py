@@ -29,11 +29,16 @@ CONFIG_FORMAT = 3
 
 
 def _format_2_to_3(config: dict[str, Any]) -> dict[str, Any]:
-    """Format 2's saved data in format 3: ``field.zerorf`` (with ``enabled``) becomes ZeroRF's model config."""
+    """Format 2's saved data in format 3: ``field.zerorf`` (with ``enabled``) becomes ZeroRF's model config, without
+    its silhouette term; ``fourier.init_in_band`` at its default is dropped."""
     model = config.get("pipeline", {}).get("model", {})
     zerorf = model.get("field", {}).pop("zerorf", None)
     if isinstance(zerorf, dict) and zerorf.pop("enabled", False):
-        model["_type"], model["zerorf"] = "ZeroRFModelConfig", zerorf
+        # trained before ZeroRF's silhouette term: it resumes and evaluates as it was trained
+        model["_type"], model["zerorf"], model["alpha_weight"] = "ZeroRFModelConfig", zerorf, 0.0
+    fourier = model.get("fourier", {})
+    if fourier.get("init_in_band") is False:  # the option left with its default; a run that set it stays refused
+        fourier.pop("init_in_band")
     accel = model.get("accel", {})
     if accel.get("backend") == "reference":
         accel["backend"] = "reference-grid-ops"

@@ -77,9 +77,6 @@ class FourierConfig:
     f_final_color: float | None = None
     """Final cutoff of the appearance grids; None: ``f_final``. With ``f_final`` < 1 and this 1, only the geometry
     stays band-limited, and the field filters a quarter of the channels once the ramp is over (16 of 64 per plane)."""
-    init_in_band: bool = False
-    """Start the raw factors low-passed at f0, so no initial noise waits outside the band (the paper and the official
-    code keep it: it shows up as the band opens, multiplied by partners trained in the meantime)."""
     plane_leakage: float = 0.0
     """Weight kept on out-of-band plane coefficients; the paper zeroes them, the official code keeps 1e-6."""
     boundary: Literal["periodic", "mirror"] = "periodic"
@@ -144,8 +141,6 @@ class FourieRFModel(nn.Module):
         self.random_background_step = self._random_background_step()
         self._background_now = self.training_background(0)  # ``prepare`` sets it for each step
         self.field = self._build_field(scene_box, effects, generator, device)
-        if config.fourier.enabled and config.fourier.init_in_band and isinstance(self.field, FourierTensoRFField):
-            self.field.keep_band(*self.cutoffs(0))
         self.occupancy = OccupancyGrid()
         self.empty_at_last_update = False  # the latest occupancy update found no density: a dead field, late in a run
 

@@ -1,4 +1,4 @@
-"""fourierf_plugin.bench.protocol with the child processes faked: ``threads`` reaches both the training and every
+"""benchmarks/harness.py with the child processes faked: ``threads`` reaches both the training and every
 evaluation, so jobs run side by side never oversubscribe the cores (an evaluation without it takes every core)."""
 
 from __future__ import annotations
@@ -6,9 +6,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import harness as protocol
 import pytest
 
-from fourierf_plugin.bench import protocol
 from fourierf_plugin.utils.console import cpu_threads_note
 
 

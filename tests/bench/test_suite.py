@@ -1,36 +1,46 @@
-"""benchmarks/pmid.py on made-up rows: settings are chosen on val alone, the plans skip what a method cannot vary,
-and an unknown ``--only`` name or a misplaced ``--seeds`` is one clear error."""
+"""benchmarks/run.py and report.py on made-up rows: settings are chosen on val alone, the plans skip what a method
+cannot vary, and an unknown ``--only`` name or a misplaced ``--seeds`` is one clear error."""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import subprocess
 import sys
 from pathlib import Path
-from types import ModuleType
 
+import harness
 import pytest
+from harness import chosen_setting, load_results, read_repeats, rows_by, setting_flags
 
 from tests.helpers import load_benchmark
 
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "pmid.py"
+SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "run.py"
+SUITE = harness.load_suite()
+SEEDS = SUITE.seeds
+RULE = SUITE.rule_along_the_budget
 
 
-@pytest.fixture(scope="module")
-def pmid() -> ModuleType:
-    return load_benchmark("pmid")
+runner = load_benchmark("run")
+rep = load_benchmark("report")
+
+
+def _target(scene: str, protocol: str, lead: float, floor: float | None = None, **more) -> dict:
+    return {"scene": scene, "protocol": protocol, "lead": lead, "against": "each method at its val choice", **more} | (
+        {"floor": floor} if floor is not None else {}
+    )
 
 
 def _row(setting: str, seed: int, val: float, test: float) -> dict:
     return {
-        "key": f"lego/fourierf-vm_pcpu-{setting}_800_s{seed}", "scene": "lego", "protocol": "pcpu",
+        "key": f"lego/fourierf-vm_cpu-800_{setting}_800_s{seed}", "scene": "lego", "protocol": "cpu-800",
         "method": "fourierf-vm", "setting": setting, "seed": seed, "val_psnr": val, "psnr": test,
     }  # fmt: skip
 
 
-def test_a_settings_name_is_its_flags(pmid: ModuleType) -> None:
-    flags = pmid.setting_flags("wd0-nodecay-lr0.04-tv4-comp8-f0d0.1")
+def test_a_settings_name_is_its_flags() -> None:
+    flags = setting_flags("wd0-nodecay-lr0.04-tv4-comp8-f0d0.1")
     assert flags == [
         "--optimizer.weight-decay", "0", "--optimizer.lr-decay-ratio", "1.0", "--optimizer.lr-grids", "0.04",
         "--pipeline.model.tv-weight-density", "4", "--pipeline.model.tv-weight-appearance", "4",
@@ -38,29 +48,29 @@ def test_a_settings_name_is_its_flags(pmid: ModuleType) -> None:
         "--pipeline.model.field.appearance-components", "24", "24", "24",
         "--pipeline.model.fourier.f0-density", "0.1",
     ]  # fmt: skip
-    assert pmid.setting_flags("preset") == []
-    for scene, names in pmid.SETTINGS.items():
+    assert setting_flags("preset") == []
+    for scene, names in SUITE.settings.items():
         assert len(set(names)) == len(names), f"{scene}: a setting listed twice"
         for name in names:
-            pmid.setting_flags(name)  # every listed setting parses
+            setting_flags(name)  # every listed setting parses
     with pytest.raises(ValueError, match="no such token 'tvx'"):
-        pmid.setting_flags("lr0.08-tvx")
+        setting_flags("lr0.08-tvx")
 
 
-def test_the_choice_reads_validation_only(pmid: ModuleType) -> None:
-    first = pmid.SEEDS[0]
+def test_the_choice_reads_validation_only() -> None:
+    first = SEEDS[0]
     rows = [
         _row("preset", first, val=21.0, test=30.0),  # best on test: must not be picked
         _row("wd0", first, val=22.0, test=20.0),
         _row("wd0", 1, val=10.0, test=10.0),  # later seeds do not take part in the choice
     ]
-    groups = pmid.rows_by({r["key"]: r for r in rows}, "lego", "pcpu", "fourierf-vm")
-    assert pmid.chosen_setting(groups) == "wd0"
-    assert pmid.chosen_setting({}) is None
+    groups = rows_by({r["key"]: r for r in rows}, "lego", "cpu-800", "fourierf-vm")
+    assert chosen_setting(groups, SEEDS) == "wd0"
+    assert chosen_setting({}, SEEDS) is None
 
 
-def test_settings_run_on_every_seed_are_chosen_by_their_mean_val(pmid: ModuleType) -> None:
-    first, *later = pmid.SEEDS
+def test_settings_run_on_every_seed_are_chosen_by_their_mean_val() -> None:
+    first, *later = SEEDS
     rows = [
         _row("lucky", first, val=22.6, test=30.0),  # best first seed, worst mean: the mean decides
         *[_row("lucky", seed, val=22.0, test=30.0) for seed in later],
@@ -70,28 +80,30 @@ def test_settings_run_on_every_seed_are_chosen_by_their_mean_val(pmid: ModuleTyp
         _row("two-seeds", first, val=23.0, test=30.0),
         _row("two-seeds", later[0], val=24.0, test=30.0),  # best mean of those run, but not on every seed
     ]
-    groups = pmid.rows_by({r["key"]: r for r in rows}, "lego", "pcpu", "fourierf-vm")
-    assert pmid.chosen_setting(groups) == "steady"
-    assert pmid.val_cell(groups["lucky"]) == "22.60 (seeds: 22.20)"
-    assert pmid.val_cell(groups["one-seed"]) == "23.00"
-    assert pmid.val_cell(groups["two-seeds"]) == f"23.00 (seeds {first}, {later[0]}: 23.50)"
+    groups = rows_by({r["key"]: r for r in rows}, "lego", "cpu-800", "fourierf-vm")
+    assert chosen_setting(groups, SEEDS) == "steady"
+    assert rep.val_cell(groups["lucky"], SEEDS) == "22.60 (seeds: 22.20)"
+    assert rep.val_cell(groups["one-seed"], SEEDS) == "23.00"
+    assert rep.val_cell(groups["two-seeds"], SEEDS) == f"23.00 (seeds {first}, {later[0]}: 23.50)"
 
 
-def test_plans_skip_curriculum_settings_for_tensorf_and_keep_only(pmid: ModuleType) -> None:
-    args = argparse.Namespace(protocol=["pcpu"], scene=["lego"], only=["wd0", "wd0-ramp0.5"], methods=None)
-    plan = {(r.method, r.views) for _, r in pmid.sweep_plan(args)}
-    assert plan == {("fourierf-vm", "pcpu-wd0"), ("tensorf-vm", "pcpu-wd0"), ("fourierf-vm", "pcpu-wd0-ramp0.5")}
+def test_plans_skip_curriculum_settings_for_tensorf_and_keep_only() -> None:
+    args = argparse.Namespace(protocol=["cpu-800"], scene=["lego"], only=["wd0", "wd0-ramp0.5"], methods=None)
+    plan = {(r.method, r.views) for *_, r in runner.sweep_plan(args)}
+    assert plan == {
+        ("fourierf-vm", "cpu-800_wd0"), ("tensorf-vm", "cpu-800_wd0"), ("fourierf-vm", "cpu-800_wd0-ramp0.5")
+    }  # fmt: skip
     args.only = ["wd0-nodecay-ffinal0.7", "wd0-nodecay-occ"]
-    plan = {(r.method, r.views) for _, r in pmid.sweep_plan(args)}
-    assert ("tensorf-vm", "pcpu-wd0-nodecay-ffinal0.7") not in plan, "a final cutoff is a curriculum setting"
-    assert ("tensorf-vm", "pcpu-wd0-nodecay-occ") in plan
+    plan = {(r.method, r.views) for *_, r in runner.sweep_plan(args)}
+    assert ("tensorf-vm", "cpu-800_wd0-nodecay-ffinal0.7") not in plan, "a final cutoff is a curriculum setting"
+    assert ("tensorf-vm", "cpu-800_wd0-nodecay-occ") in plan
     args.methods = ["fourierf-vm"]
-    assert {r.method for _, r in pmid.sweep_plan(args)} == {"fourierf-vm"}, "--methods keeps the others out"
-    args = argparse.Namespace(protocol=["pmid800"], scene=["lego", "fern"], only=None, methods=None)
-    assert {scene for scene, _ in pmid.sweep_plan(args)} == {"fern"}, "P-MID at 800 iterations is fern's check"
-    for single_scene in ("phigh", "pmid300"):
+    assert {r.method for *_, r in runner.sweep_plan(args)} == {"fourierf-vm"}, "--methods keeps the others out"
+    args = argparse.Namespace(protocol=["mid-800"], scene=["lego", "fern"], only=None, methods=None)
+    assert {p[0] for p in runner.sweep_plan(args)} == {"fern"}, "mid-800 is fern's check"
+    for single_scene in ("high-3000", "mid-grid300-3000"):
         args = argparse.Namespace(protocol=[single_scene], scene=["lego", "fern"], only=None, methods=None)
-        assert {scene for scene, _ in pmid.sweep_plan(args)} == {"lego"}, f"{single_scene} measures lego only"
+        assert {p[0] for p in runner.sweep_plan(args)} == {"lego"}, f"{single_scene} measures lego only"
 
 
 def test_an_unknown_setting_is_one_clear_error(tmp_path: Path) -> None:
@@ -122,87 +134,90 @@ def test_an_unknown_setting_is_one_clear_error(tmp_path: Path) -> None:
     assert "--seeds picks the later seeds of the seeds stage; drop it for the sweep stage" in done.stderr
 
 
-def test_a_curve_trains_the_800_iteration_choice_unless_told(pmid: ModuleType, tmp_path: Path) -> None:
+def test_a_curve_trains_the_800_iteration_choice_unless_told(tmp_path: Path) -> None:
     results = tmp_path / "results.jsonl"
-    rows = [_row("wd0", pmid.SEEDS[0], val=22.0, test=20.0), _row("preset", pmid.SEEDS[0], val=21.0, test=21.0)]
-    tensorf = _row("wd0-nodecay", pmid.SEEDS[0], val=21.5, test=21.0) | {"method": "tensorf-vm"}
-    tensorf["key"] = "lego/tensorf-vm_pcpu-wd0-nodecay_800_s20211202"
-    results.write_text("".join(pmid.json.dumps(r) + "\n" for r in [*rows, tensorf]))
-    args = argparse.Namespace(protocol=["pcpu3000"], scene=["lego"], only=None, results=results, methods=None)
-    plan = {(r.method, r.views, r.iters) for _, r in pmid.curve_plan(args)}
-    assert plan == {("fourierf-vm", "pcpu3000-wd0", 3000), ("tensorf-vm", "pcpu3000-wd0-nodecay", 3000)}
+    rows = [_row("wd0", SEEDS[0], val=22.0, test=20.0), _row("preset", SEEDS[0], val=21.0, test=21.0)]
+    tensorf = _row("wd0-nodecay", SEEDS[0], val=21.5, test=21.0) | {"method": "tensorf-vm"}
+    tensorf["key"] = "lego/tensorf-vm_cpu-800_wd0-nodecay_800_s20211202"
+    results.write_text("".join(json.dumps(r) + "\n" for r in [*rows, tensorf]))
+    args = argparse.Namespace(protocol=["cpu-3000"], scene=["lego"], only=None, results=results, methods=None)
+    plan = {(r.method, r.views, r.iters) for *_, r in runner.curve_plan(args)}
+    assert plan == {("fourierf-vm", "cpu-3000_wd0", 3000), ("tensorf-vm", "cpu-3000_wd0-nodecay", 3000)}
     args.methods = ["tensorf-vm"]
-    assert {(r.method, r.views) for _, r in pmid.curve_plan(args)} == {("tensorf-vm", "pcpu3000-wd0-nodecay")}
+    assert {(r.method, r.views) for *_, r in runner.curve_plan(args)} == {("tensorf-vm", "cpu-3000_wd0-nodecay")}
     args.methods = None
     args.only = ["wd0-ramp0.5", "preset"]
-    plan = {(r.method, r.views) for _, r in pmid.curve_plan(args)}
-    assert plan == {("fourierf-vm", "pcpu3000-wd0-ramp0.5"), ("fourierf-vm", "pcpu3000-preset"),
-                    ("tensorf-vm", "pcpu3000-preset")}  # fmt: skip
+    plan = {(r.method, r.views) for *_, r in runner.curve_plan(args)}
+    assert plan == {("fourierf-vm", "cpu-3000_wd0-ramp0.5"), ("fourierf-vm", "cpu-3000_preset"),
+                    ("tensorf-vm", "cpu-3000_preset")}  # fmt: skip
     args.only = ["wd0-ramp0.5"]  # curriculum settings alone: tensorf-vm has nothing to run, and that is no error
-    assert {(r.method, r.views) for _, r in pmid.curve_plan(args)} == {("fourierf-vm", "pcpu3000-wd0-ramp0.5")}
-    args.protocol = ["pcpu"]
+    assert {(r.method, r.views) for *_, r in runner.curve_plan(args)} == {("fourierf-vm", "cpu-3000_wd0-ramp0.5")}
+    args.protocol = ["cpu-800"]
     with pytest.raises(SystemExit, match="the curve stage runs"):
-        pmid.curve_plan(args)
+        runner.curve_plan(args)
 
 
-def test_the_curve_table_sets_each_step_beside_the_short_run(pmid: ModuleType) -> None:
-    short = _row("wd0", pmid.SEEDS[0], val=19.5, test=19.0)
-    long = _row("wd0", pmid.SEEDS[0], val=20.25, test=19.75) | {
-        "key": "lego/fourierf-vm_pcpu3000-wd0_3000_s20211202", "protocol": "pcpu3000",
+def test_the_curve_table_sets_each_step_beside_the_short_run() -> None:
+    short = _row("wd0", SEEDS[0], val=19.5, test=19.0)
+    long = _row("wd0", SEEDS[0], val=20.25, test=19.75) | {
+        "key": "lego/fourierf-vm_cpu-3000_wd0_3000_s20211202", "protocol": "cpu-3000",
         "curve": [[500, 18.0, 17.5], [3000, 20.25, 19.75]],
     }  # fmt: skip
-    table = pmid.curve_table({r["key"]: r for r in (short, long)})
+    table = rep.curve_table({r["key"]: r for r in (short, long)})
     row = next(line for line in table if line.startswith("| lego"))
     assert row == "| lego | fourierf-vm | `wd0` | 19.50 / 19.00 | 500: 18.00 / 17.50 · 3000: 20.25 / 19.75 |"
-    assert pmid.curve_table({short["key"]: short}) == []
+    assert rep.curve_table({short["key"]: short}) == []
 
 
-def test_the_curve_table_sets_the_rules_3000_iteration_setting_beside_its_800(pmid: ModuleType) -> None:
-    (p_short, short), (p_long, long) = pmid.RULE_ALONG_THE_BUDGET["fourierf-vm"]
+def test_the_curve_table_sets_the_rules_3000_iteration_setting_beside_its_800() -> None:
+    p_short, p_long = "cpu-800", "cpu-3000"
+    short, long = RULE["fourierf-vm"]["at_800"], RULE["fourierf-vm"]["at_3000"]
     fern = {"scene": "fern", "method": "fourierf-vm"}
     rows = [
-        _row(short, pmid.SEEDS[0], val=19.5, test=19.0) | fern | {"protocol": p_short, "key": "short"},
-        _row(long, pmid.SEEDS[0], val=21.0, test=20.5) | fern | {
+        _row(short, SEEDS[0], val=19.5, test=19.0) | fern | {"protocol": p_short, "key": "short"},
+        _row(long, SEEDS[0], val=21.0, test=20.5) | fern | {
             "protocol": p_long, "key": "long", "curve": [[3000, 21.0, 20.5]],
         },
     ]  # fmt: skip
-    row = next(line for line in pmid.curve_table({r["key"]: r for r in rows}) if line.startswith("| fern"))
+    row = next(line for line in rep.curve_table({r["key"]: r for r in rows}) if line.startswith("| fern"))
     assert f"| 19.50 / 19.00 (`{short}`) |" in row, "the rule's 800-iteration run stands beside its 3000"
 
 
-def test_the_equal_time_line_compares_more_iterations_with_the_final_cutoff(pmid: ModuleType) -> None:
-    longer = _row("wd0-nodecay", pmid.SEEDS[0], val=22.0, test=21.5) | {"protocol": "pcpu1040", "key": "a"}
+def test_the_equal_time_line_compares_more_iterations_with_the_final_cutoff() -> None:
+    longer = _row("wd0-nodecay", SEEDS[0], val=22.0, test=21.5) | {"protocol": "cpu-1040", "key": "a"}
     capped = [_row("wd0-nodecay-ffinal0.7", seed, val=22.25, test=22.0) | {"key": f"b{seed}"} for seed in (1, 2)]
-    lines = pmid.equal_time_lines({r["key"]: r for r in (longer, *capped)})
+    lines = rep.equal_time_lines({r["key"]: r for r in (longer, *capped)})
     assert lines == [
         "- lego, fourierf-vm, equal wall time: `wd0-nodecay` at 1040 iterations val 22.00, test 21.50 (1 seeds) "
         "against `wd0-nodecay-ffinal0.7` at 800 val 22.25 ± 0.00, test 22.00 ± 0.00 (2 seeds)"
     ]
-    assert pmid.equal_time_lines({"a": longer}) == []
+    assert rep.equal_time_lines({"a": longer}) == []
 
 
-def test_the_rule_line_sets_each_methods_800_iteration_run_beside_its_3000(pmid: ModuleType) -> None:
+def test_the_rule_line_sets_each_methods_800_iteration_run_beside_its_3000() -> None:
     rows = []
-    for method, ((p_short, short), (p_long, long)) in pmid.RULE_ALONG_THE_BUDGET.items():
+    p_short, p_long = "cpu-800", "cpu-3000"
+    for method, rule in RULE.items():
+        short, long = rule["at_800"], rule["at_3000"]
         base = {"scene": "fern", "method": method}
         rows += [
-            _row(short, pmid.SEEDS[0], val=19.5, test=19.0) | base | {"protocol": p_short, "key": f"{method}/short"},
+            _row(short, SEEDS[0], val=19.5, test=19.0) | base | {"protocol": p_short, "key": f"{method}/short"},
             # a later seed recorded first: the line sets the first seed's runs side by side, never a later one's
-            _row(long, pmid.SEEDS[1], val=25.0, test=25.0) | base | {"protocol": p_long, "key": f"{method}/long1"},
-            _row(long, pmid.SEEDS[0], val=21.0, test=20.5) | base | {"protocol": p_long, "key": f"{method}/long"},
+            _row(long, SEEDS[1], val=25.0, test=25.0) | base | {"protocol": p_long, "key": f"{method}/long1"},
+            _row(long, SEEDS[0], val=21.0, test=20.5) | base | {"protocol": p_long, "key": f"{method}/long"},
         ]
-    lines = pmid.rule_along_the_budget({r["key"]: r for r in rows})
+    lines = rep.rule_along_the_budget({r["key"]: r for r in rows})
     assert lines == [
-        f"- fern, {method}, the budget rule's settings at P-CPU sizes: `{short}` at 800 iterations val 19.50, "
-        f"test 19.00 → `{long}` at 3000 val 21.00, test 20.50"
-        for method, ((_, short), (_, long)) in pmid.RULE_ALONG_THE_BUDGET.items()
+        f"- fern, {method}, the budget rule's settings at cpu sizes: `{rule['at_800']}` at 800 iterations val "
+        f"19.50, test 19.00 → `{rule['at_3000']}` at 3000 val 21.00, test 20.50"
+        for method, rule in RULE.items()
     ]
-    assert pmid.rule_along_the_budget({r["key"]: r for r in rows[:1]}) == [], "no 3000-iteration run: no line"
-    assert pmid.rule_along_the_budget({r["key"]: r for r in rows[:2]}) == [], "a later seed's alone: no line"
+    assert rep.rule_along_the_budget({r["key"]: r for r in rows[:1]}) == [], "no 3000-iteration run: no line"
+    assert rep.rule_along_the_budget({r["key"]: r for r in rows[:2]}) == [], "a later seed's alone: no line"
 
 
-def test_the_targets_table_reads_each_target_against_the_baseline_it_names(pmid: ModuleType) -> None:
-    first, one, two = pmid.SEEDS
+def test_the_targets_table_reads_each_target_against_the_baseline_it_names() -> None:
+    first, one, two = SEEDS
     tensorf = {"method": "tensorf-vm"}
     rows = [
         *[_row("tv4", seed, val=23.0, test=test) for seed, test in ((first, 23.0), (one, 23.2), (two, 23.4))],
@@ -212,65 +227,64 @@ def test_the_targets_table_reads_each_target_against_the_baseline_it_names(pmid:
     ]
     results = {r["key"]: r for r in rows}
     targets = (
-        pmid.Target("lego", "pcpu", 0.5, 22.0),
-        pmid.Target("lego", "pcpu", 2.5, 23.5, tensorf=("published", "best-on-test"), against="a weak baseline"),
-        pmid.Target("lego", "pmid", 1.0),  # nothing run: no line
+        _target("lego", "cpu-800", 0.5, 22.0),
+        _target("lego", "cpu-800", 2.5, 23.5, tensorf=("published", "best-on-test"), against="a weak baseline"),
+        _target("lego", "mid-3000", 1.0),  # nothing run: no line
     )
-    lines = [line for line in pmid.targets_table(results, targets) if line.startswith("| lego")]
+    table = rep.targets_table(results, dataclasses.replace(SUITE, targets=targets))
+    lines = [line for line in table if line.startswith("| lego")]
     assert len(lines) == 2
     assert "`tuned`, 22.00 (1) | **+1.20** (+1.00) | met |" in lines[0], "the lead is the mean over each one's seeds"
     assert "≥ 22.0 dB and ≥ +0.5 dB; each method at its val choice" in lines[0]
     assert "`published`, 20.50 (1) | **+2.70** (+2.50) | missed: PSNR by 0.30 |" in lines[1]
     assert "23.20 ± 0.16 (3)" in lines[1]
-    short = (pmid.Target("lego", "pcpu", 1.5),)
-    assert pmid.targets_table(results, short)[4].endswith("| missed: lead by 0.30 |")
-    assert pmid.targets_table({}, targets) == []
+    short = (_target("lego", "cpu-800", 1.5),)
+    assert rep.targets_table(results, dataclasses.replace(SUITE, targets=short))[4].endswith("| missed: lead by 0.30 |")
+    assert rep.targets_table({}, dataclasses.replace(SUITE, targets=targets)) == []
 
 
-def test_the_p_mid_line_sets_the_first_seeds_800_iteration_run_beside_its_3000(pmid: ModuleType) -> None:
+def test_the_p_mid_line_sets_the_first_seeds_800_iteration_run_beside_its_3000() -> None:
     fern = {"scene": "fern", "method": "tensorf-vm", "setting": "lr0.08"}
     rows = [
-        fern | {"protocol": "pmid800", "seed": pmid.SEEDS[0], "val_psnr": 16.5, "psnr": 15.5, "key": "short"},
+        fern | {"protocol": "mid-800", "seed": SEEDS[0], "val_psnr": 16.5, "psnr": 15.5, "key": "short"},
         # a later seed recorded before the first seed's (a rerun goes to the end): the first seed's is the line's
-        fern | {"protocol": "pmid", "seed": pmid.SEEDS[2], "val_psnr": 30.0, "psnr": 30.0, "key": "later"},
-        fern | {"protocol": "pmid", "seed": pmid.SEEDS[0], "val_psnr": 19.0, "psnr": 18.0, "key": "long"},
+        fern | {"protocol": "mid-3000", "seed": SEEDS[2], "val_psnr": 30.0, "psnr": 30.0, "key": "later"},
+        fern | {"protocol": "mid-3000", "seed": SEEDS[0], "val_psnr": 19.0, "psnr": 18.0, "key": "long"},
     ]
-    assert pmid.p_mid_along_the_budget({r["key"]: r for r in rows}) == [
-        "- fern, tensorf-vm, P-MID sizes, `lr0.08`, 800 → 3000 iterations: val 16.50 → 19.00, test 15.50 → 18.00"
+    assert rep.mid_along_the_budget({r["key"]: r for r in rows}) == [
+        "- fern, tensorf-vm, mid sizes, `lr0.08`, 800 → 3000 iterations: val 16.50 → 19.00, test 15.50 → 18.00"
     ]
-    assert pmid.p_mid_along_the_budget({r["key"]: r for r in rows[:2]}) == [], "no first-seed 3000 run: no line"
+    assert rep.mid_along_the_budget({r["key"]: r for r in rows[:2]}) == [], "no first-seed 3000 run: no line"
 
 
-def test_seeds_run_the_val_choice_on_the_later_seeds(pmid: ModuleType, tmp_path: Path) -> None:
+def test_seeds_run_the_val_choice_on_the_later_seeds(tmp_path: Path) -> None:
     results = tmp_path / "results.jsonl"
-    rows = [_row("wd0", pmid.SEEDS[0], val=22.0, test=20.0), _row("preset", pmid.SEEDS[0], val=21.0, test=23.0)]
-    results.write_text("".join(pmid.json.dumps(r) + "\n" for r in rows))
+    rows = [_row("wd0", SEEDS[0], val=22.0, test=20.0), _row("preset", SEEDS[0], val=21.0, test=23.0)]
+    results.write_text("".join(json.dumps(r) + "\n" for r in rows))
     args = argparse.Namespace(
-        protocol=["pcpu"], scene=["lego"], results=results, methods=["fourierf-vm"], only=None, seeds=None
+        protocol=["cpu-800"], scene=["lego"], results=results, methods=["fourierf-vm"], only=None, seeds=None
     )
-    plan = [(r.method, r.views, r.seed) for _, r in pmid.seeds_plan(args)]
-    assert plan == [("fourierf-vm", "pcpu-wd0", seed) for seed in pmid.SEEDS[1:]]
+    plan = [(r.method, r.views, r.seed) for *_, r in runner.seeds_plan(args)]
+    assert plan == [("fourierf-vm", "cpu-800_wd0", seed) for seed in SEEDS[1:]]
     args.methods = None  # tensorf-vm has no sweep row: one clear error
-    with pytest.raises(SystemExit, match="no sweep result for lego pcpu tensorf-vm"):
-        pmid.seeds_plan(args)
+    with pytest.raises(SystemExit, match="no sweep result for lego cpu-800 tensorf-vm"):
+        runner.seeds_plan(args)
 
 
-def test_seeds_of_named_settings_skip_what_tensorf_cannot_vary(pmid: ModuleType, tmp_path: Path) -> None:
+def test_seeds_of_named_settings_skip_what_tensorf_cannot_vary(tmp_path: Path) -> None:
     results = tmp_path / "results.jsonl"
     results.write_text("")
     args = argparse.Namespace(
-        protocol=["pcpu"], scene=["lego"], results=results, methods=None, only=["wd0-ramp0.5"], seeds=None
+        protocol=["cpu-800"], scene=["lego"], results=results, methods=None, only=["wd0-ramp0.5"], seeds=None
     )
-    plan = [(r.method, r.views, r.seed) for _, r in pmid.seeds_plan(args)]
-    assert plan == [("fourierf-vm", "pcpu-wd0-ramp0.5", seed) for seed in pmid.SEEDS[1:]]
-    args.seeds = [pmid.SEEDS[2]]  # one of the later seeds, when a run is long
-    assert [r.seed for _, r in pmid.seeds_plan(args)] == [pmid.SEEDS[2]]
+    plan = [(r.method, r.views, r.seed) for *_, r in runner.seeds_plan(args)]
+    assert plan == [("fourierf-vm", "cpu-800_wd0-ramp0.5", seed) for seed in SEEDS[1:]]
+    args.seeds = [SEEDS[2]]  # one of the later seeds, when a run is long
+    assert [r.seed for *_, r in runner.seeds_plan(args)] == [SEEDS[2]]
 
 
-def test_the_later_seeds_table_holds_gpu_settings_run_on_every_later_seed_beside_their_repeats(
-    pmid: ModuleType,
-) -> None:
-    one, two = pmid.SEEDS[1:]
+def test_the_later_seeds_table_holds_gpu_settings_run_on_every_later_seed_beside_their_repeats() -> None:
+    one, two = SEEDS[1:]
     gpu = {"device": "cuda"}
     rows = [
         _row("tv4", one, val=21.0, test=20.0) | gpu,
@@ -282,16 +296,16 @@ def test_the_later_seeds_table_holds_gpu_settings_run_on_every_later_seed_beside
     repeats = [
         r | {"val_psnr": r["val_psnr"] + 0.5, "repeat": "an older tree"} for r in rows[:2]
     ]  # the same keys, run before
-    table = pmid.later_seeds_table({r["key"]: r for r in rows}, repeats)
+    table = rep.later_seeds_table({r["key"]: r for r in rows}, repeats)
     lines = [line for line in table if line.startswith("| lego")]
     assert lines == [
-        "| lego | P-CPU | fourierf-vm | `tv4` | 21.00 / 20.00 | 22.00 / 21.00 | 21.50 / 20.50 |",
-        "| lego | P-CPU | fourierf-vm | `tv4` (an older tree) | 21.50 / 20.00 | 22.50 / 21.00 | 22.00 / 20.50 |",
+        "| lego | cpu-800 | fourierf-vm | `tv4` | 21.00 / 20.00 | 22.00 / 21.00 | 21.50 / 20.50 |",
+        "| lego | cpu-800 | fourierf-vm | `tv4` (an older tree) | 21.50 / 20.00 | 22.50 / 21.00 | 22.00 / 20.50 |",
     ]
-    assert pmid.later_seeds_table({r["key"]: r for r in rows[2:]}, []) == []
+    assert rep.later_seeds_table({r["key"]: r for r in rows[2:]}, []) == []
 
 
-def test_training_seconds_are_compared_on_one_device_both_methods_ran_on(pmid: ModuleType) -> None:
+def test_training_seconds_are_compared_on_one_device_both_methods_ran_on() -> None:
     def run(device: str, seconds: float) -> dict:
         return {"device": device, "train_seconds": seconds}
 
@@ -299,65 +313,65 @@ def test_training_seconds_are_compared_on_one_device_both_methods_ran_on(pmid: M
         "fourierf-vm": [run("cuda", 210.0), run("cuda", 212.0), run("cuda", 214.0)],
         "tensorf-vm": [run("cpu", 2986.0), run("cuda", 230.0), run("cuda", 234.0)],
     }
-    assert pmid.comparable_seconds(rows) == "212 / 232 (cuda)"
+    assert rep.comparable_seconds(rows) == "212 / 232 (cuda)"
     rows["tensorf-vm"] = [run("cpu", 2986.0)]
-    assert pmid.comparable_seconds(rows) == "— (no shared device)"  # no mixed mean
+    assert rep.comparable_seconds(rows) == "— (no shared device)"  # no mixed mean
 
 
-def test_the_machine_line_names_the_rows_machines_not_the_reporters(pmid: ModuleType) -> None:
+def test_the_machine_line_names_the_rows_machines_not_the_reporters() -> None:
     rows = [_row("wd0", 1, 22.0, 22.0), _row("wd0", 2, 22.0, 22.0) | {"machine": "CPU A, 2 cores"}]
     rows.append(_row("wd0", 3, 22.0, 22.0) | {"machine": "CPU A, 2 cores"})
-    line = pmid.recording_machines(rows)
+    line = rep.recording_machines(rows)
     assert line.count("CPU A, 2 cores") == 1 and "2-core CPUs" in line
-    assert "record theirs" not in pmid.recording_machines(rows[:1])
+    assert "record theirs" not in rep.recording_machines(rows[:1])
 
 
 def test_threads_below_one_is_one_clear_error(tmp_path: Path) -> None:
-    done = subprocess.run([sys.executable, str(SCRIPT), "report", "--threads", "0", "--work", str(tmp_path)],
+    done = subprocess.run([sys.executable, str(SCRIPT), "sweep", "--threads", "0", "--work", str(tmp_path)],
                           capture_output=True, text=True)  # fmt: skip
     assert done.returncode != 0 and "--threads 0 must be at least 1" in done.stderr
     assert "Traceback" not in done.stderr
 
 
-def test_a_run_again_moves_the_earlier_row_to_the_repeats_with_its_note(pmid: ModuleType, tmp_path: Path) -> None:
+def test_a_run_again_moves_the_earlier_row_to_the_repeats_with_its_note(tmp_path: Path) -> None:
     path = tmp_path / "results.jsonl"
     first, other = _row("tv4", 1, val=21.0, test=20.0), _row("tv6", 1, val=20.0, test=19.0)
     for row in (first, other):
-        pmid.record(path, row)
+        runner.record(path, row)
     rerun = first | {"val_psnr": 21.5, "train_threads": 1}
-    pmid.record(path, rerun, again="threads not recorded")
-    results = pmid.load_results(path)
+    runner.record(path, rerun, again="threads not recorded")
+    results = load_results(path)
     assert results == {first["key"]: rerun, other["key"]: other}  # one row a key, the latest
     assert len(path.read_text().splitlines()) == 2
-    repeats = pmid.read_repeats(path.with_name(pmid.REPEATS))
+    repeats = read_repeats(path.with_name(harness.REPEATS))
     assert repeats == [first | {"repeat": "threads not recorded"}]  # nothing recorded is lost
-    pmid.record(path, rerun | {"val_psnr": 21.6}, again="a second rerun")
-    assert [r["val_psnr"] for r in pmid.read_repeats(path.with_name(pmid.REPEATS))] == [21.0, 21.5]
-    pmid.record(path, _row("tv8", 1, val=19.0, test=18.0), again="nothing earlier")  # a new key: nothing moves
-    assert len(pmid.read_repeats(path.with_name(pmid.REPEATS))) == 2
+    runner.record(path, rerun | {"val_psnr": 21.6}, again="a second rerun")
+    assert [r["val_psnr"] for r in read_repeats(path.with_name(harness.REPEATS))] == [21.0, 21.5]
+    runner.record(path, _row("tv8", 1, val=19.0, test=18.0), again="nothing earlier")  # a new key: nothing moves
+    assert len(read_repeats(path.with_name(harness.REPEATS))) == 2
 
 
-def test_the_threads_cell_says_which_cpu_rows_are_reproducible(pmid: ModuleType) -> None:
+def test_the_threads_cell_says_which_cpu_rows_are_reproducible() -> None:
     cpu = {"device": "cpu"}
-    assert pmid.threads_cell([cpu | {"train_threads": 1}, cpu | {"train_threads": 1}]) == "1"
-    assert pmid.threads_cell([cpu | {"train_threads": 1}, cpu]) == "1 / ?"  # a row from before rows recorded it
-    assert pmid.threads_cell([{"device": "cuda"}]) == "—"
+    assert rep.threads_cell([cpu | {"train_threads": 1}, cpu | {"train_threads": 1}]) == "1"
+    assert rep.threads_cell([cpu | {"train_threads": 1}, cpu]) == "1 / ?"  # a row from before rows recorded it
+    assert rep.threads_cell([{"device": "cuda"}]) == "—"
 
 
-def test_the_cpu_reruns_table_sets_a_cpu_repeat_beside_the_row_read(pmid: ModuleType) -> None:
+def test_the_cpu_reruns_table_sets_a_cpu_repeat_beside_the_row_read() -> None:
     kept = _row("tv4", 1, val=21.5, test=20.5) | {"device": "cpu", "train_threads": 1}
     earlier = _row("tv4", 1, val=21.0, test=20.0) | {"device": "cpu", "repeat": "threads not recorded"}
     gpu = _row("tv6", 1, val=20.0, test=19.0) | {"device": "cuda", "repeat": "a GPU repeat"}  # the later-seeds table's
     stray = _row("tv8", 1, val=20.0, test=19.0) | {"device": "cpu", "repeat": "its key is gone"}
     results = {r["key"]: r for r in (kept, gpu | {"repeat": ""})}
-    lines = [line for line in pmid.cpu_reruns_table(results, [earlier, gpu, stray]) if line.startswith("| lego")]
+    lines = [line for line in rep.cpu_reruns_table(results, [earlier, gpu, stray]) if line.startswith("| lego")]
     assert lines == [
-        "| lego | P-CPU | fourierf-vm | `tv4` | 1 | 21.50 / 20.50 (1) | 21.00 / 20.00 (?) | threads not recorded |"
+        "| lego | cpu-800 | fourierf-vm | `tv4` | 1 | 21.50 / 20.50 (1) | 21.00 / 20.00 (?) | threads not recorded |"
     ]
-    assert pmid.cpu_reruns_table(results, []) == []
+    assert rep.cpu_reruns_table(results, []) == []
 
 
-@pytest.mark.parametrize("extra", [["report", "--again", "x"], ["sweep", "--again", " "]])
+@pytest.mark.parametrize("extra", [["seeds", "--again", ""], ["sweep", "--again", " "]])
 def test_again_without_a_run_or_a_note_is_one_clear_error(tmp_path: Path, extra: list[str]) -> None:
     done = subprocess.run([sys.executable, str(SCRIPT), *extra, "--work", str(tmp_path)],
                           capture_output=True, text=True)  # fmt: skip
@@ -365,38 +379,39 @@ def test_again_without_a_run_or_a_note_is_one_clear_error(tmp_path: Path, extra:
     assert "Traceback" not in done.stderr
 
 
-def test_run_all_skips_recorded_runs_unless_run_again(pmid: ModuleType, tmp_path: Path, monkeypatch) -> None:
-    run = pmid.Run("fourierf-vm", 800, 1, "pcpu-tv4")
+def test_run_all_skips_recorded_runs_unless_run_again(tmp_path: Path, monkeypatch) -> None:
+    run = harness.Run("fourierf-vm", 800, 1, "cpu-800_tv4")
     path = tmp_path / "results.jsonl"
-    pmid.record(path, _row("tv4", 1, val=21.0, test=20.0))
+    runner.record(path, _row("tv4", 1, val=21.0, test=20.0))
     ran = []
 
-    def execute(run, scene, args):  # a finished training and evaluation, without either
+    def execute(point, args):  # a finished training and evaluation, without either
         ran.append(run.key)
         return _row("tv4", 1, val=21.5, test=20.5) | {"train_seconds": 1.0}
 
-    monkeypatch.setattr(pmid, "execute", execute)
+    monkeypatch.setattr(runner, "execute", execute)
     args = argparse.Namespace(results=path, jobs=1, again=None, work=tmp_path)
-    pmid.run_all([("lego", run)], args)
-    assert ran == [] and pmid.load_results(path)[f"lego/{run.key}"]["val_psnr"] == 21.0  # recorded: skipped
-    pmid.run_all([("lego", run)], argparse.Namespace(**{**vars(args), "again": "threads not recorded"}))
-    assert ran == [run.key] and pmid.load_results(path)[f"lego/{run.key}"]["val_psnr"] == 21.5
-    assert [r["repeat"] for r in pmid.read_repeats(path.with_name(pmid.REPEATS))] == ["threads not recorded"]
+    runner.run_all([("lego", "cpu-800", "tv4", run)], args)
+    assert ran == [] and load_results(path)[f"lego/{run.key}"]["val_psnr"] == 21.0  # recorded: skipped
+    point = ("lego", "cpu-800", "tv4", run)
+    runner.run_all([point], argparse.Namespace(**{**vars(args), "again": "threads not recorded"}))
+    assert ran == [run.key] and load_results(path)[f"lego/{run.key}"]["val_psnr"] == 21.5
+    assert [r["repeat"] for r in read_repeats(path.with_name(harness.REPEATS))] == ["threads not recorded"]
 
 
-def test_merge_records_rows_run_elsewhere_as_a_run_would(pmid: ModuleType, tmp_path: Path) -> None:
+def test_merge_records_rows_run_elsewhere_as_a_run_would(tmp_path: Path) -> None:
     path, lane = tmp_path / "results.jsonl", tmp_path / "lane" / "results.jsonl"
-    pmid.record(path, _row("tv4", 1, val=21.0, test=20.0))
+    runner.record(path, _row("tv4", 1, val=21.0, test=20.0))
     lane.parent.mkdir()
     rerun, new = _row("tv4", 1, val=21.5, test=20.5) | {"train_threads": 1}, _row("tv6", 2, val=20.0, test=19.0)
     lane.write_text(f"{json.dumps(rerun)}\n\n{json.dumps(new)}\n")
-    lines = pmid.merge(path, [lane], again=None)
+    lines = runner.merge(path, [lane], again=None)
     assert lines[0].endswith("recorded, skipped (--again NOTE keeps this row, the earlier to the repeats)")
-    assert pmid.load_results(path)[rerun["key"]]["val_psnr"] == 21.0 and new["key"] in pmid.load_results(path)
-    lines = pmid.merge(path, [lane], again="threads not recorded")
+    assert load_results(path)[rerun["key"]]["val_psnr"] == 21.0 and new["key"] in load_results(path)
+    lines = runner.merge(path, [lane], again="threads not recorded")
     assert lines[0] == f"{rerun['key']}: val 21.50  test 20.50  (threads 1)"
-    assert pmid.load_results(path)[rerun["key"]] == rerun
-    repeats = pmid.read_repeats(path.with_name(pmid.REPEATS))
+    assert load_results(path)[rerun["key"]] == rerun
+    repeats = read_repeats(path.with_name(harness.REPEATS))
     assert [(r["key"], r["val_psnr"], r["repeat"]) for r in repeats] == [
         (rerun["key"], 21.0, "threads not recorded"),
         (new["key"], 20.0, "threads not recorded"),  # merged twice: the first merge's row is kept, not lost

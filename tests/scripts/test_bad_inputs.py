@@ -315,11 +315,6 @@ CASES: dict[str, Case] = {
     "train: colour final cutoff above 1": Case(
         "train", train_with(f"{MODEL}.fourier.f-final-color", "2"), ("f-final-color 2", "(0, 1]")
     ),
-    "train: start inside a band that is off": Case(
-        "train",
-        train_with(f"{MODEL}.fourier.init-in-band", "True", f"{MODEL}.fourier.enabled", "False"),
-        ("init-in-band True", "curriculum", "off", "drop"),
-    ),
     "train: mirror boundaries of a band that is off": Case(
         "train",
         train_with(f"{MODEL}.fourier.boundary", "mirror", f"{MODEL}.fourier.enabled", "False"),

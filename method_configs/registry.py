@@ -25,6 +25,7 @@ from fourierf_plugin.method_configs.presets import (
     fourierf_vm_paper,
     tensorf_cp,
     tensorf_vm,
+    tensorf_vm_published,
     zerorf_vm,
 )
 from fourierf_plugin.method_configs.sizing import SIZED_PATHS
@@ -36,6 +37,7 @@ all_methods: dict[str, TrainerConfig] = {
     "fourierf-vm-code": fourierf_vm_code,
     "tensorf-vm": tensorf_vm,
     "tensorf-cp": tensorf_cp,
+    "tensorf-vm-published": tensorf_vm_published,
     "zerorf-vm": zerorf_vm,
 }
 all_descriptions: dict[str, str] = dict(descriptions)

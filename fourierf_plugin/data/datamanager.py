@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+import math
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -43,6 +44,40 @@ def camera_rays(cameras: Cameras, index: int, ray_space: RaySpace) -> tuple[Tens
     return cameras.generate_rays(index)
 
 
+RaySchedule = tuple[tuple[float, float], ...]
+"""Stages of the ray batch: (fraction of the run where the stage starts, multiplier of ``rays_per_batch``)."""
+
+SCHEDULE_FLAG = "--pipeline.datamanager.rays-per-batch-schedule"
+
+
+def rays_per_batch_at(
+    step: int, rays_per_batch: int, schedule: Sequence[Sequence[float]] | None, max_iters: int
+) -> int:
+    """Training rays at ``step`` of a run of ``max_iters``: ``rays_per_batch`` times the multiplier of the last stage
+    of ``schedule`` that has started (a stage at fraction f starts at step ⌊f · max_iters + ½⌋, the rounding of the
+    run's other events), ``rays_per_batch`` before the first and without a schedule. A function of the step alone,
+    so a resumed run draws the batches the uninterrupted one does."""
+    scale = 1.0
+    for fraction, multiplier in schedule or ():
+        if step >= math.floor(fraction * max_iters + 0.5):
+            scale = multiplier
+    return rays_per_batch if scale == 1.0 else max(1, round(rays_per_batch * scale))
+
+
+def invalid_schedule(schedule: Sequence[Sequence[float]] | None) -> str | None:
+    """Why ``schedule`` cannot be used (what it must be), or None when it can."""
+    if schedule is None:
+        return None
+    fractions = [stage[0] for stage in schedule]
+    if any(len(stage) != 2 for stage in schedule):
+        return "pairs of (fraction of the run, multiplier)"
+    if not all(math.isfinite(f) and 0.0 <= f <= 1.0 for f in fractions) or fractions != sorted(fractions):
+        return "stages at increasing fractions of the run in [0, 1]"
+    if not all(math.isfinite(m) and m > 0 for _, m in schedule):
+        return "multipliers > 0"
+    return None
+
+
 def to_device(tensor: Tensor, device: torch.device) -> Tensor:
     """A host tensor on ``device``; to a GPU through pinned memory, so the copy runs without stalling the host."""
     if device.type == "cuda":
@@ -72,8 +107,17 @@ class DataManager:
         generator: torch.Generator,
         ray_space: RaySpace,
         load_train: bool = True,
+        max_iters: int = 1,
     ):
+        why = invalid_schedule(config.rays_per_batch_schedule)
+        if why is not None:
+            shown = " ".join(f"{value:g}" for stage in config.rays_per_batch_schedule or () for value in stage)
+            fail(
+                f"{SCHEDULE_FLAG} {shown} is out of range: it must be {why}",
+                f"pass e.g. {SCHEDULE_FLAG} 0.0051 4 0.0101 16",
+            )
         self.config = config
+        self.max_iters = max_iters  # the run's length, where the ray schedule's fractions fall
         self.device = device
         self.generator = generator  # batches are drawn where it lives (the device, for a GPU step without copies)
         self.parser = config.dataparser.setup()
@@ -113,10 +157,16 @@ class DataManager:
         self._cursor = 0
         return int(self.active.numel())
 
-    def next_batch(self) -> RayBatch:
-        """A batch of training rays; a fresh permutation each epoch, the tail of an epoch dropped."""
+    def rays_at(self, step: int) -> int:
+        """Training rays at ``step`` (``rays_per_batch``, or its multiple in the schedule's stage at ``step``)."""
+        c = self.config
+        return rays_per_batch_at(step, c.rays_per_batch, c.rays_per_batch_schedule, self.max_iters)
+
+    def next_batch(self, step: int = 0) -> RayBatch:
+        """A batch of training rays for ``step`` (``rays_at``); a fresh permutation each epoch, the tail of an epoch
+        dropped."""
         assert self.train_rays is not None
-        size = min(self.config.rays_per_batch, int(self.active.numel()))
+        size = min(self.rays_at(step), int(self.active.numel()))
         if size == 0:
             fail("no training rays left", "check the scene box and near/far planes of the dataset")
         if self._cursor + size > self._order.numel():
@@ -167,4 +217,8 @@ class DataManagerConfig(InstantiateConfig):
     _target: ClassVar[type] = DataManager
     dataparser: DataParserUnion = field(default_factory=default_dataparser)
     rays_per_batch: int = 4096
-    """Training rays per iteration."""
+    """Training rays per iteration (the first stage's, with ``rays_per_batch_schedule``)."""
+    rays_per_batch_schedule: RaySchedule | None = None
+    """Where the batch grows: (fraction of the run, multiplier of ``rays_per_batch``) pairs, each stage from its
+    fraction on, 1× before the first (``rays_per_batch_at``); None = ``rays_per_batch`` throughout (zerorf-vm:
+    ZeroRF's 1 → 4 → 16 at 0.51% and 1.01% of the run)."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from fourierf_plugin.data.datamanager import rays_per_batch_at
 from fourierf_plugin.engine.option_checks import grid_values
 from fourierf_plugin.field_components.generator import parameter_count
 from fourierf_plugin.field_components.schedules import steps_from_fractions, voxel_counts
@@ -21,11 +22,22 @@ SECONDS_PER_GENERATED_VALUE = 1.0e-6
 measured on the development machine: three 128² canvases of 16 channels, ~0.77 s)."""
 
 
+def mean_rays_per_batch(config: Any) -> float:
+    """Training rays per iteration averaged over the run (a batch schedule, such as ZeroRF's, grows it)."""
+    manager, iterations = config.pipeline.datamanager, max(1, config.max_num_iterations)
+    schedule = getattr(manager, "rays_per_batch_schedule", None)
+    if not schedule:
+        return float(manager.rays_per_batch)
+    return (
+        sum(rays_per_batch_at(s, manager.rays_per_batch, schedule, iterations) for s in range(iterations)) / iterations
+    )
+
+
 def estimate_seconds(config: Any, threads: int) -> float:
     """A CPU run's training time from the measured cost (scaled by the threads it gets)."""
     field = config.pipeline.model.field
     side = field.n_voxels_final ** (1.0 / 3.0)
-    rays = config.pipeline.datamanager.rays_per_batch + config.pipeline.model.unseen_rays()
+    rays = mean_rays_per_batch(config) + config.pipeline.model.unseen_rays()
     per_iteration = rays * side * SECONDS_PER_RAY_STEP
     zerorf = generator_config(config.pipeline.model)
     if zerorf is not None:  # a cubic box's canvases: the smallest multiple of 2^levels covering the final grid

@@ -128,6 +128,8 @@ RULES: tuple[Rule, ...] = (
     Rule(f"{_MODEL}.field.appearance_components", each(int_at_least(1)), "component counts >= 1", "48 48 48"),
     Rule(f"{_MODEL}.field.appearance_dim", int_at_least(1), "an integer >= 1", "27"),
     Rule(f"{_MODEL}.field.hidden_dim", int_at_least(1), "an integer >= 1", "128"),
+    Rule(f"{_MODEL}.field.feature_frequencies", int_at_least(0), "an integer >= 0 (0 = no encoding)", "2"),
+    Rule(f"{_MODEL}.field.view_frequencies", int_at_least(0), "an integer >= 0 (0 = no encoding)", "2"),
     Rule(f"{_MODEL}.field.init_scale", optional(positive), "a standard deviation > 0 (or omitted)", "0.1"),
     Rule(f"{_MODEL}.field.revive_patience", int_at_least(1), "a count of training batches >= 1", "16"),
     Rule("optimizer.lr_grids", positive, "a learning rate > 0", "0.02"),
@@ -200,7 +202,6 @@ def _some_axes(axes: Any) -> bool:
 
 
 BAND_OPTIONS: tuple[tuple[str, Callable[[Any], bool], str], ...] = (
-    ("init_in_band", lambda v: v is True, "there is no band to start in"),
     ("boundary", lambda v: v == "mirror", "nothing is filtered"),
     ("density_axes", _some_axes, "nothing is filtered"),
 )

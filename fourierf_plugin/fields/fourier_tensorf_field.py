@@ -22,6 +22,7 @@ from torch import Tensor, nn
 from fourierf_plugin.field_components.activations import RevivingReLU
 from fourierf_plugin.field_components.decoder import AppearanceDecoder
 from fourierf_plugin.field_components.tensor_grids import TensorCP, TensorGrid, TensorVM
+from fourierf_plugin.field_components.tensorf_decoder import TensoRFDecoder
 from fourierf_plugin.fields.grid_ops import FilteredFactors, GridOps
 from fourierf_plugin.fields.prepared_field import FilteredGrids, PreparedField
 
@@ -45,6 +46,14 @@ class FieldConfig:
     """Width of the appearance feature fed to the decoder."""
     hidden_dim: int = 128
     """Decoder width."""
+    decoder: Literal["few-shot", "tensorf"] = "few-shot"
+    """Colour decoder: ``few-shot`` the paper's (SiLU, no encoding; the view's SH₂ when view-dependent), ``tensorf``
+    TensoRF's MLP on the feature and the view direction beside their sinusoidal encodings
+    (``field_components.tensorf_decoder``)."""
+    feature_frequencies: int = 2
+    """``tensorf`` decoder: frequencies encoding the appearance feature (TensoRF's fea_pe: 2 Blender, 0 LLFF)."""
+    view_frequencies: int = 2
+    """``tensorf`` decoder: frequencies encoding the view direction (TensoRF's view_pe: 2 Blender, 0 LLFF)."""
     init_scale: float | None = None
     """Std of the initial grid values; None = TensoRF's 0.1 (VM) / 0.2 (CP)."""
     density_shift: float = -10.0
@@ -90,7 +99,14 @@ class FourierTensoRFField(PreparedField):
         self.appearance_grid: TensorGrid = grid_cls(reso, config.appearance_components, init, generator)
         app_in = sum(config.appearance_components) if config.decomposition == "vm" else config.appearance_components[0]
         self.basis = nn.Linear(app_in, config.appearance_dim, bias=False)
-        self.decoder = AppearanceDecoder(config.appearance_dim, config.hidden_dim, view_dependent)
+        self.decoder: AppearanceDecoder | TensoRFDecoder = (
+            TensoRFDecoder(
+                config.appearance_dim, config.hidden_dim, view_dependent, config.feature_frequencies,
+                config.view_frequencies,
+            )
+            if config.decoder == "tensorf"
+            else AppearanceDecoder(config.appearance_dim, config.hidden_dim, view_dependent)
+        )  # fmt: skip
         revive = config.density_activation == "relu" and config.revive_dead_density
         self.density_relu = RevivingReLU(config.revive_patience) if revive else None
 
@@ -138,9 +154,11 @@ class FourierTensoRFField(PreparedField):
 
     def rgb(self, xyz: Tensor, directions: Tensor | None) -> Tensor:
         """Colour in [0, 1] at world points [N, 3] (directions unit [N, 3], used only when view-dependent)."""
-        return self.ops.appearance(
-            self.appearance_grid, self.filtered.appearance, self.basis, self.decoder, self.normalize(xyz), directions
-        )
+        grid, factors, xyz = self.appearance_grid, self.filtered.appearance, self.normalize(xyz)
+        if isinstance(self.decoder, TensoRFDecoder) and torch.is_grad_enabled():
+            # the grid operations' training path fuses only the few-shot decoder's layers into the basis
+            return self.decoder(self.basis(torch.cat(self.ops.features(grid, factors, xyz), dim=-1)), directions)
+        return self.ops.appearance(grid, factors, self.basis, self.decoder, xyz, directions)  # type: ignore[arg-type]
 
     # -- structure and parameters ----------------------------------------------------------------------------------
     def crop(self, lo: Sequence[int], hi: Sequence[int], box: Tensor) -> None:
@@ -153,17 +171,6 @@ class FourierTensoRFField(PreparedField):
         """Replace each raw factor by the bilinear upsample of its *filtered* version (out-of-band is dropped)."""
         for grid, factors in self._grids_with(self.filtered):
             grid.replace(*grid.upsampled(factors.planes, factors.lines, list(reso)))
-
-    def keep_band(self, f_density: float, f_color: float) -> None:
-        """Replace each raw factor by its low-pass at these cutoffs: what lies outside the band starts at 0.
-
-        Why: the filter hides the initial noise outside the band from the gradient, so it stays in the raw factors and
-        shows up as the band opens, multiplied by partners that have meanwhile been trained (spec 4.4)."""
-        with torch.no_grad():
-            filtered = self.filter(f_density, f_color)
-        for grid, factors in self._grids_with(filtered):
-            grid.replace(factors.planes, factors.lines)
-        self.invalidate()
 
     def _grids_with(self, filtered: FilteredGrids) -> tuple[tuple[TensorGrid, FilteredFactors], ...]:
         """Each raw grid beside its filtered factors (density, then appearance)."""

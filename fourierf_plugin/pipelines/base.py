@@ -48,7 +48,11 @@ class Pipeline:
         self.effects = config.effects.effects()
         self.step_generator = step_generator(generator, device, uses_gpu_paths(config.model.accel, device))
         self.datamanager: DataManager = config.datamanager.setup(
-            device=device, generator=self.step_generator, ray_space=self.effects.ray_space, load_train=load_train
+            device=device,
+            generator=self.step_generator,
+            ray_space=self.effects.ray_space,
+            load_train=load_train,
+            max_iters=max_iters,
         )
         scene = self.datamanager.reference_outputs
         check_patch_fits(config.model, scene.cameras.width, scene.cameras.height)
@@ -79,7 +83,7 @@ class Pipeline:
         """Loss for one batch at ``step`` and the step's metrics, still on the device (``read_metrics`` reads them:
         a GPU step need not wait for them); the grids are filtered once here and reused by every term."""
         with phase("data"):
-            batch = self.datamanager.next_batch()
+            batch = self.datamanager.next_batch(step)
         self.model.prepare(step)
         outputs = self.model(batch.origins, batch.directions)
         with phase("losses"):

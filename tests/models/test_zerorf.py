@@ -341,9 +341,12 @@ def test_a_format_2_config_json_loads_as_zerorfs_model_config(tmp_path: Path) ->
     model["_type"] = "FourieRFModelConfig"
     model["field"]["zerorf"] = {"_type": "ZeroRFConfig", "enabled": True, **to_dict(model.pop("zerorf"))}
     model["accel"]["backend"] = "reference"
+    model["fourier"]["init_in_band"] = False  # an option format 2 had, at its default
     path = tmp_path / "config.json"
     path.write_text(json.dumps({"fourierf_version": "0.1.0", "config_format": 2, "config": config}))
     loaded = load_config(path, TrainerConfig, config_registry())
     assert type(loaded.pipeline.model) is ZeroRFModelConfig
     assert loaded.pipeline.model.accel.backend == "reference-grid-ops"
-    assert replace(loaded.pipeline.model, accel=AccelConfig()) == all_methods["zerorf-vm"].pipeline.model
+    assert loaded.pipeline.model.alpha_weight == 0.0, "trained without the silhouette term, it resumes without it"
+    preset = all_methods["zerorf-vm"].pipeline.model
+    assert replace(loaded.pipeline.model, accel=AccelConfig(), alpha_weight=preset.alpha_weight) == preset

@@ -1,11 +1,13 @@
 """The few-shot regularisers, one module each; ``build`` gives those a model config asks for, in the order their terms
-are taken (training-ray terms first to last, then the unseen-view terms in the same order)."""
+are taken (training-ray terms first to last, then the unseen-view terms in the same order). ZeroRF's alpha term
+(``alpha``) needs the target's alpha, which only ZeroRF's model hands its regularisers: its config adds it."""
 
 from __future__ import annotations
 
 from typing import Any
 
 from fourierf_plugin.data.scene_effects import SceneEffects
+from fourierf_plugin.model_components.regularisers.alpha import Alpha
 from fourierf_plugin.model_components.regularisers.base import Regulariser, TrainingRays, UnseenViews
 from fourierf_plugin.model_components.regularisers.depth_smoothness import DepthSmoothness
 from fourierf_plugin.model_components.regularisers.distortion import Distortion
@@ -15,6 +17,7 @@ from fourierf_plugin.model_components.regularisers.occlusion import Occlusion
 
 __all__ = [
     "KINDS",
+    "Alpha",
     "DepthSmoothness",
     "Distortion",
     "Entropy",

@@ -15,7 +15,7 @@ from fourierf_plugin.scripts.cli import run_cli, strip_verbose
 from fourierf_plugin.scripts.run_options import RunOptions
 from fourierf_plugin.utils.console import get_console, warn, write_json
 from fourierf_plugin.utils.errors import fail
-from fourierf_plugin.utils.files import check_writable_dir
+from fourierf_plugin.utils.files import check_writable_dir, run_renders_dir
 from fourierf_plugin.utils.lpips import LPIPS, default_lpips_weights
 
 
@@ -59,18 +59,6 @@ def check_outputs(cfg: EvalConfig) -> None:
         check_writable_dir(cfg.render_dir.parent, "--render-dir")
 
 
-def default_render_dir(run_dir: Path, split: str, step: int, overwrite: bool) -> Path:
-    """RUN/renders/<split>-step<N>/, or with --overwrite that folder again; else the first free ``-1``, ``-2`` ...
-    beside it, so a second evaluation keeps the first one's renders."""
-    base = run_dir / "renders" / f"{split}-step{step:06d}"
-    if overwrite or not base.exists():
-        return base
-    n = 1
-    while base.with_name(f"{base.name}-{n}").exists():
-        n += 1
-    return base.with_name(f"{base.name}-{n}")
-
-
 def run_eval(cfg: EvalConfig) -> dict:
     console = get_console()
     check_outputs(cfg)
@@ -79,7 +67,7 @@ def run_eval(cfg: EvalConfig) -> dict:
     lpips = LPIPS(weights).to(run.device) if weights is not None else None
     if lpips is None:
         warn("LPIPS weights not found; LPIPS is skipped (pass --lpips-weights PATH to include it)")
-    render_dir = cfg.render_dir or default_render_dir(run.run_dir, cfg.split, run.step, cfg.overwrite)
+    render_dir = cfg.render_dir or run_renders_dir(run.run_dir, cfg.split, run.step, cfg.overwrite)
     report = evaluate(
         run, cfg.split, lpips, None if skips_renders(render_dir) else render_dir, print_view, cfg.overwrite
     )

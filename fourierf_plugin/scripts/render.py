@@ -50,6 +50,7 @@ from fourierf_plugin.scripts.run_options import RunOptions
 from fourierf_plugin.utils.colormaps import Colormap, colorize_accumulation, colorize_depth, depth_range, to_uint8
 from fourierf_plugin.utils.console import TaskProgress, format_duration, get_console, warn
 from fourierf_plugin.utils.errors import UserError, fail
+from fourierf_plugin.utils.files import run_renders_dir
 from fourierf_plugin.utils.memory import available_memory, check_fits
 
 OUTPUT_NAMES = ("rgb", "depth", "accumulation")
@@ -404,18 +405,6 @@ def existing_outputs(output_dir: Path, outputs: list[str]) -> list[Path]:
     return taken
 
 
-def default_output_dir(run_dir: Path, mode: str, step: int, overwrite: bool) -> Path:
-    """RUN/renders/<mode>-step<N>/, or with --overwrite that folder again; else the first free ``-1``, ``-2`` ...
-    beside it, so a second render of the same mode keeps the first."""
-    base = run_dir / "renders" / f"{mode}-step{step:06d}"
-    if overwrite or not base.exists():
-        return base
-    n = 1
-    while base.with_name(f"{base.name}-{n}").exists():
-        n += 1
-    return base.with_name(f"{base.name}-{n}")
-
-
 def _staging(final: Path) -> Path:
     """A hidden sibling of ``final`` that the work is written to before it is renamed into place."""
     return final.with_name(f".{final.name}.partial-{os.getpid()}{final.suffix}")
@@ -511,7 +500,7 @@ def render(cfg: RenderConfig) -> RenderResult:
     cameras, stems, mode = build_cameras(cfg, run)
     cameras = scale_cameras(cameras, cfg.resolution_scale)
     check_frame_fits(cameras.width, cameras.height, cfg.resolution_scale)
-    output_dir = cfg.output_dir or default_output_dir(run.run_dir, mode, run.step, cfg.overwrite)
+    output_dir = cfg.output_dir or run_renders_dir(run.run_dir, mode, run.step, cfg.overwrite)
     _mkdir(output_dir)
     staged = {name: _staging(output_dir / name) for name in outputs}
     try:

@@ -38,3 +38,15 @@ def read_json_object(path: Path, fix: str, holds: str) -> dict[str, Any]:
     if not isinstance(content, dict):
         fail(f"{path} must hold a JSON object with {holds}", fix)
     return content
+
+
+def run_renders_dir(run_dir: Path, name: str, step: int, overwrite: bool) -> Path:
+    """RUN/renders/<name>-step<N>/, or with --overwrite that folder again; else the first free ``-1``, ``-2`` ...
+    beside it, so a second evaluation or render keeps the first one's pictures."""
+    base = run_dir / "renders" / f"{name}-step{step:06d}"
+    if overwrite or not base.exists():
+        return base
+    n = 1
+    while base.with_name(f"{base.name}-{n}").exists():
+        n += 1
+    return base.with_name(f"{base.name}-{n}")

@@ -70,6 +70,12 @@ def _cameras(c2w: Tensor, fx: float, fy: float, cx: float, cy: float, width: int
     return Cameras(c2w.float(), full(fx), full(fy), full(cx), full(cy), int(width), int(height))
 
 
+def _like_first(cameras: Cameras, c2w: Tensor) -> Cameras:
+    """Cameras at ``c2w`` with the first camera's intrinsics and image size."""
+    k = cameras
+    return _cameras(c2w, float(k.fx[0]), float(k.fy[0]), float(k.cx[0]), float(k.cy[0]), k.width, k.height)
+
+
 def _check_frames(n_frames: int) -> None:
     if n_frames < 1:
         raise ValueError(f"n_frames must be >= 1, got {n_frames}")
@@ -228,15 +234,7 @@ def spiral_path(
         offset = torch.tensor([math.cos(theta), -math.sin(theta), -math.sin(theta * zrate)]) * radii
         eye = center + rotation @ offset
         poses.append(_view_matrix(eye - focus, up, eye))
-    return _cameras(
-        torch.stack(poses),
-        float(cameras.fx[0]),
-        float(cameras.fy[0]),
-        float(cameras.cx[0]),
-        float(cameras.cy[0]),
-        cameras.width,
-        cameras.height,
-    )
+    return _like_first(cameras, torch.stack(poses))
 
 
 def azimuths(centers: Tensor, center: Vector, up: Vector) -> Tensor:
@@ -294,15 +292,7 @@ def arc_path(
         theta = middle + span * (fraction - 0.5)
         eye = c + radius * (math.cos(theta) * e1 + math.sin(theta) * e2) + float(height.mean()) * up_t
         poses.append(_view_matrix(eye - c, up_t, eye))
-    return _cameras(
-        torch.stack(poses),
-        float(cameras.fx[0]),
-        float(cameras.fy[0]),
-        float(cameras.cx[0]),
-        float(cameras.cy[0]),
-        cameras.width,
-        cameras.height,
-    )
+    return _like_first(cameras, torch.stack(poses))
 
 
 def capture_order(centers: Tensor) -> list[int]:

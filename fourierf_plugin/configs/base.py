@@ -22,30 +22,37 @@ from fourierf_plugin import __version__
 from fourierf_plugin.utils.errors import fail
 
 C = TypeVar("C", bound="InstantiateConfig")
-CONFIG_FORMAT = 3
-"""3: ZeroRF's model config of its own (``pipeline.model.zerorf``), the plain grid operations named
-``reference-grid-ops``; 2: scene effects under ``pipeline.effects`` (resolved), speed settings under
-``pipeline.model.accel``."""
+CONFIG_FORMAT = 4
+"""4: no ``fourier.init_in_band``, ZeroRF's silhouette term (``alpha_weight``); 3: ZeroRF's model config of its own
+(``pipeline.model.zerorf``), the plain grid operations named ``reference-grid-ops``; 2: scene effects under
+``pipeline.effects`` (resolved), speed settings under ``pipeline.model.accel``."""
 
 
 def _format_2_to_3(config: dict[str, Any]) -> dict[str, Any]:
-    """Format 2's saved data in format 3: ``field.zerorf`` (with ``enabled``) becomes ZeroRF's model config, without
-    its silhouette term; ``fourier.init_in_band`` at its default is dropped."""
+    """Format 2's saved data in format 3: ``field.zerorf`` (with ``enabled``) becomes ZeroRF's model config."""
     model = config.get("pipeline", {}).get("model", {})
     zerorf = model.get("field", {}).pop("zerorf", None)
     if isinstance(zerorf, dict) and zerorf.pop("enabled", False):
-        # trained before ZeroRF's silhouette term: it resumes and evaluates as it was trained
-        model["_type"], model["zerorf"], model["alpha_weight"] = "ZeroRFModelConfig", zerorf, 0.0
-    fourier = model.get("fourier", {})
-    if fourier.get("init_in_band") is False:  # the option left with its default; a run that set it stays refused
-        fourier.pop("init_in_band")
+        model["_type"], model["zerorf"] = "ZeroRFModelConfig", zerorf
     accel = model.get("accel", {})
     if accel.get("backend") == "reference":
         accel["backend"] = "reference-grid-ops"
     return config
 
 
-UPGRADES: dict[int, Callable[[dict[str, Any]], dict[str, Any]]] = {2: _format_2_to_3}
+def _format_3_to_4(config: dict[str, Any]) -> dict[str, Any]:
+    """Format 3's saved data in format 4: ``fourier.init_in_band`` at its default is dropped (a run that set it stays
+    refused), and ZeroRF runs trained without the silhouette term resume and evaluate without it."""
+    model = config.get("pipeline", {}).get("model", {})
+    fourier = model.get("fourier", {})
+    if fourier.get("init_in_band") is False:
+        fourier.pop("init_in_band")
+    if model.get("_type") == "ZeroRFModelConfig":
+        model.setdefault("alpha_weight", 0.0)
+    return config
+
+
+UPGRADES: dict[int, Callable[[dict[str, Any]], dict[str, Any]]] = {2: _format_2_to_3, 3: _format_3_to_4}
 """Format N's saved data in format N + 1; ``load_config`` applies them in turn up to ``CONFIG_FORMAT``."""
 
 
@@ -215,6 +222,11 @@ def load_config(path: Path, expected: type[C] | None, registry: Registry) -> C:
         payload = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         fail(f"{path} is not valid JSON ({err})", "point at an untouched config.json written by fourierf-train")
+    except RecursionError:
+        fail(
+            f"{path} nests its JSON too deeply to be read",
+            "point at an untouched config.json written by fourierf-train",
+        )
     if not isinstance(payload, dict) or "config" not in payload:
         fail(f"{path} is not a fourierf config (no 'config' key)", "point at a config.json written by fourierf-train")
     fmt = payload.get("config_format")
@@ -229,7 +241,7 @@ def load_config(path: Path, expected: type[C] | None, registry: Registry) -> C:
         )
     try:
         return from_dict(config, expected, registry)
-    except (ValueError, TypeError, KeyError) as err:
+    except (ValueError, TypeError, KeyError, RecursionError) as err:
         fail(
             f"{path} does not match this fourierf version's config: {err}",
             "retrain, or use the fourierf version that wrote it",

@@ -342,6 +342,7 @@ def test_a_format_2_config_json_loads_as_zerorfs_model_config(tmp_path: Path) ->
     model["field"]["zerorf"] = {"_type": "ZeroRFConfig", "enabled": True, **to_dict(model.pop("zerorf"))}
     model["accel"]["backend"] = "reference"
     model["fourier"]["init_in_band"] = False  # an option format 2 had, at its default
+    model.pop("alpha_weight")  # a term format 2 did not have
     path = tmp_path / "config.json"
     path.write_text(json.dumps({"fourierf_version": "0.1.0", "config_format": 2, "config": config}))
     loaded = load_config(path, TrainerConfig, config_registry())
@@ -350,3 +351,19 @@ def test_a_format_2_config_json_loads_as_zerorfs_model_config(tmp_path: Path) ->
     assert loaded.pipeline.model.alpha_weight == 0.0, "trained without the silhouette term, it resumes without it"
     preset = all_methods["zerorf-vm"].pipeline.model
     assert replace(loaded.pipeline.model, accel=AccelConfig(), alpha_weight=preset.alpha_weight) == preset
+
+
+def test_a_format_3_config_json_drops_init_in_band_and_keeps_zerorf_without_the_silhouette(tmp_path: Path) -> None:
+    """Format 3 carried ``fourier.init_in_band`` and no ``alpha_weight``: it loads, a ZeroRF run without the term."""
+    config = to_dict(all_methods["zerorf-vm"])
+    model = config["pipeline"]["model"]
+    model.pop("alpha_weight")
+    model["fourier"]["init_in_band"] = False
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps({"fourierf_version": "0.1.0", "config_format": 3, "config": config}))
+    loaded = load_config(path, TrainerConfig, config_registry())
+    assert type(loaded.pipeline.model) is ZeroRFModelConfig and loaded.pipeline.model.alpha_weight == 0.0
+    model["fourier"]["init_in_band"] = True  # a run that used the removed option is refused, not silently changed
+    path.write_text(json.dumps({"fourierf_version": "0.1.0", "config_format": 3, "config": config}))
+    with pytest.raises(UserError, match="init_in_band"):
+        load_config(path, TrainerConfig, config_registry())

@@ -13,14 +13,16 @@ from pathlib import Path
 from fourierf_plugin.configs.base import config_classes, load_config, to_dict
 from fourierf_plugin.data.parsers.capture_parser import CaptureParserConfig
 from fourierf_plugin.data.scene_effects import EffectsConfig
-from fourierf_plugin.engine.loading import locate_data
+from fourierf_plugin.engine.loading import check_same_scene, locate_data
 from fourierf_plugin.engine.machine import pick_device
+from fourierf_plugin.engine.option_checks import check_saved_config, ignored_band_flags
 from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.method_configs.budget import apply_budget_rule
 from fourierf_plugin.method_configs.registry import all_methods
 from fourierf_plugin.method_configs.scene_presets import apply_real_scene_preset, apply_settings
 from fourierf_plugin.method_configs.sizing import run_size
 from fourierf_plugin.method_configs.time_budget import apply_time_budget
+from fourierf_plugin.utils.console import warn
 from fourierf_plugin.utils.errors import fail
 
 
@@ -35,6 +37,12 @@ def finalize(config: TrainerConfig, given: frozenset[str] = frozenset()) -> tupl
     and the notes that say what was decided and why (for the caller to print). ``given``: the config paths of the
     flags the user typed (``given_options``), which no preset, sizing or rule overrides."""
     config = copy.deepcopy(config)
+    ignored = ignored_band_flags(config, given)
+    if ignored:
+        warn(
+            f"{' '.join(ignored)} set the Fourier curriculum, which is off in this run ({config.method_name}): "
+            "ignored; train a fourierf-* preset to use them"
+        )
     parser = config.pipeline.datamanager.dataparser
     if config.data is not None and str(parser.data) != "." and Path(parser.data) != Path(config.data):
         fail(
@@ -121,29 +129,39 @@ def resume_config(
     """The saved config of the run in ``load_dir``, set to resume there (it must be a ``method_name`` run), reading
     its scene from ``data`` if given (a moved scene), on the threads and device ``machine`` asks for (if given)."""
     saved = load_config(load_dir, TrainerConfig, config_registry())
+    check_saved_config(saved, Path(load_dir) / "config.json")
     if machine is not None:
         saved.threads = machine.threads if machine.threads is not None else saved.threads
         saved.device = machine.device if machine.device != "auto" else saved.device
-    saved.pipeline.datamanager.dataparser.data = locate_data(saved, Path(load_dir), data)
+    parser = saved.pipeline.datamanager.dataparser
+    recorded = Path(parser.data)
+    parser.data = locate_data(saved, Path(load_dir), data)
     if saved.method_name != method_name:
         fail(
             f"{load_dir} holds a '{saved.method_name}' run, but '{method_name}' was asked to resume it",
             f"run: fourierf-train {saved.method_name} --load-dir {load_dir}",
         )
+    if data is not None and Path(parser.data) != recorded:  # config.json and views.json will name it from now on
+        check_same_scene(Path(load_dir), Path(parser.data), parser.setup().get_outputs("train"))
     saved.load_dir = Path(load_dir)
     return saved
 
 
-def ignored_on_resume(config: TrainerConfig) -> list[str]:
-    """The flags of a resume command that the saved run would silently ignore: everything that differs from the
-    method's preset, except ``--load-dir``, ``--data``, ``--threads`` and ``--device`` (a resumed run keeps its own
-    config; those four say where it runs, and ``resume_config`` applies them)."""
+RESUME_FLAGS = frozenset({"load_dir", "data", "threads", "device"})
+"""What a resume command may say: where the run is, where its scene moved, and what it runs on."""
+
+
+def ignored_on_resume(config: TrainerConfig, given: frozenset[str] = frozenset()) -> list[str]:
+    """The flags of a resume command that the saved run would silently ignore: every flag typed (``given``, the
+    config paths of ``given_options``) and every value that differs from the method's preset, except
+    ``--load-dir``, ``--data``, ``--threads`` and ``--device`` (a resumed run keeps its own config; those four say
+    where it runs, and ``resume_config`` applies them). A typed value equal to the preset's counts too."""
+    typed = {k for k in given if k not in RESUME_FLAGS}
     preset = all_methods.get(config.method_name)
-    if preset is None:
-        return []
-    given, default = _flat(to_dict(config)), _flat(to_dict(preset))
-    keep = {"load_dir", "data", "threads", "device"}
-    return sorted(f"--{k.replace('_', '-')}" for k, v in given.items() if k not in keep and default.get(k) != v)
+    if preset is not None:
+        values, default = _flat(to_dict(config)), _flat(to_dict(preset))
+        typed |= {k for k, v in values.items() if k not in RESUME_FLAGS and default.get(k) != v}
+    return sorted(f"--{k.replace('_', '-')}" for k in typed)
 
 
 def _flat(tree: object, prefix: str = "") -> dict[str, object]:

@@ -22,6 +22,7 @@ from fourierf_plugin.data.images import load_images
 from fourierf_plugin.data.poses import rotation_problem
 from fourierf_plugin.data.scene_effects import SceneDeclaration
 from fourierf_plugin.data.view_selection import explicit_views, kmeans_views
+from fourierf_plugin.utils.console import warn
 from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.utils.files import read_json_object
 
@@ -94,9 +95,54 @@ def _read_transforms(path: Path) -> _Transforms:
         problem = rotation_problem(matrix)
         if problem is not None:
             fail(f"{where}: transform_matrix is not a camera pose: {problem}", f"fix or remove that frame; {fix}")
+        if np.abs(matrix).max() > FLOAT32_MAX:
+            fail(f"{where}: transform_matrix has values beyond single precision (|x| > 3.4e38)", fix)
         file_paths.append(frame["file_path"])
         matrices[i] = matrix
+    _warn_odd_frames(path, file_paths, matrices)
     return _Transforms(path, float(angle), file_paths, matrices)
+
+
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+FAR_CAMERA = 1000.0
+"""A camera farther from the cameras' median centre than this many times their median distance from it is named."""
+_warned: set[str] = set()
+
+
+def _warn_once(message: str) -> None:
+    """Each split, and each resume check, reads the file again: say a thing once per process."""
+    if message not in _warned:
+        _warned.add(message)
+        warn(message)
+
+
+def _frames(ids: list[int]) -> str:
+    return f"frame{'s' if len(ids) > 1 else ''} {', '.join(map(str, ids[:5]))}{' ...' if len(ids) > 5 else ''}"
+
+
+def _warn_odd_frames(path: Path, file_paths: list[str], matrices: np.ndarray) -> None:
+    """Warnings for what loads but is likely a mistake: a bottom row other than (0, 0, 0, 1) (ignored: the top
+    3x4 is the pose), one image named by two frames (that view counts twice), a camera far from all others."""
+    bottom = [i for i, m in enumerate(matrices) if not np.allclose(m[3], (0.0, 0.0, 0.0, 1.0), atol=1e-6)]
+    if bottom:
+        _warn_once(
+            f"{path}, {_frames(bottom)}: transform_matrix's bottom row is not (0, 0, 0, 1); only its top 3x4 "
+            "is used as the camera pose"
+        )
+    first: dict[str, int] = {}
+    for i, name in enumerate(file_paths):
+        if name in first:
+            _warn_once(f"{path}: frames {first[name]} and {i} both name {name}; that view counts twice")
+        first.setdefault(name, i)
+    centres = matrices[:, :3, 3]
+    distance = np.linalg.norm(centres - np.median(centres, axis=0), axis=1)
+    typical = float(np.median(distance))
+    far = [i for i, d in enumerate(distance) if d > FAR_CAMERA * max(typical, 1e-9)]
+    if len(matrices) > 2 and far:
+        _warn_once(
+            f"{path}, {_frames(far)}: camera at {centres[far[0]].tolist()}, over {FAR_CAMERA:g} times farther "
+            f"from the cameras' centre than the others ({typical:.3g}); check that frame's transform_matrix"
+        )
 
 
 def _image_path(data: Path, file_path: str) -> Path:

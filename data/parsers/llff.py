@@ -27,6 +27,7 @@ from fourierf_plugin.data.images import load_images
 from fourierf_plugin.data.poses import recenter_poses, rotation_problem
 from fourierf_plugin.data.scene_effects import SceneDeclaration
 from fourierf_plugin.data.view_selection import check_view_counts, explicit_views, regnerf_views, validation_views
+from fourierf_plugin.utils.console import warn
 from fourierf_plugin.utils.errors import fail
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
@@ -56,6 +57,10 @@ def load_poses_bounds(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         )
     if arr.shape[0] == 0:
         fail(f"{path} holds no cameras", "re-export poses_bounds.npy with LLFF's imgs2poses.py")
+    if arr.dtype == np.bool_ or not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+        fail(
+            f"{path} holds {arr.dtype} values, not real numbers", "re-export poses_bounds.npy with LLFF's imgs2poses.py"
+        )
     if not np.isfinite(arr).all():
         rows = sorted({int(r) for r in np.argwhere(~np.isfinite(arr))[:, 0]})
         fail(f"{path} has NaN or infinite values in row(s) {rows[:10]}", "re-run pose estimation; the file is corrupt")
@@ -64,10 +69,31 @@ def load_poses_bounds(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         problem = rotation_problem(pose[:, :4])
         if problem is not None:
             fail(f"{path}, row {row} (camera {row}): not a camera pose: {problem}", "re-run pose estimation")
+    _check_hwf(path, poses[:, :, 4])
     bounds = arr[:, 15:].astype(np.float64)
     if (bounds <= 0).any() or (bounds[:, 0] >= bounds[:, 1]).any():
         fail(f"{path} has depth bounds that are not 0 < near < far", "re-run pose estimation; the bounds are corrupt")
     return poses[:, :, :4], poses[:, :, 4], bounds
+
+
+def _check_hwf(path: Path, hwf: np.ndarray) -> None:
+    """Image size and focal of each row: a size or focal of 0 cannot project (an error); a negative focal mirrors
+    the camera (a warning: it trains, likely upside down)."""
+    bad = sorted(
+        {int(r) for r in np.argwhere(hwf[:, :2] <= 0)[:, 0]} | {int(r) for r in np.argwhere(hwf[:, 2] == 0)[:, 0]}
+    )
+    if bad:
+        fail(
+            f"{path} has a height, width or focal length of 0 or below in row(s) {bad[:10]} (H W focal: "
+            f"{' '.join(f'{v:g}' for v in hwf[bad[0]])})",
+            "re-run pose estimation (imgs2poses.py); those rows are corrupt",
+        )
+    negative = [int(r) for r in np.argwhere(hwf[:, 2] < 0)[:, 0]]
+    if negative:
+        warn(
+            f"{path} has a negative focal length in row(s) {negative[:10]} ({hwf[negative[0], 2]:g}): those cameras "
+            "are mirrored; re-run pose estimation unless that is intended"
+        )
 
 
 def to_opengl(poses: np.ndarray) -> np.ndarray:

@@ -16,6 +16,7 @@ import imageio.v3 as iio
 import numpy as np
 
 from fourierf_plugin.utils.errors import UserError, fail
+from fourierf_plugin.utils.memory import check_fits
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _PNG_CHANNELS = {0: 1, 2: 3, 4: 2, 6: 4}  # PNG colour type -> channels (gray, RGB, gray+alpha, RGBA)
@@ -63,6 +64,39 @@ def _unfilter(filtered: np.ndarray, filter_types: np.ndarray) -> np.ndarray:
     return rec[1:, 1:].astype(np.uint8)
 
 
+DECODE_BYTES_PER_VALUE = 14
+"""Peak bytes per 16-bit sample while ``_read_png16`` decodes: the inflated rows, two int32 working copies of
+``_unfilter`` and its uint8 and uint16 results."""
+
+
+def max_image_pixels() -> int | None:
+    """The pixel count beyond which an image is refused as a decompression bomb: twice Pillow's warning limit (where
+    Pillow itself raises), or None when the limit is switched off."""
+    from PIL import Image
+
+    limit = Image.MAX_IMAGE_PIXELS
+    return None if limit is None else 2 * int(limit)
+
+
+def check_decode_size(path: Path, width: int, height: int, channels: int) -> None:
+    """A UserError, from the header's dimensions and before any pixel is inflated, for an image larger than the
+    decompression-bomb limit or than the memory its decoding needs."""
+    limit = max_image_pixels()
+    if width < 1 or height < 1:
+        fail(f"image {path} is corrupt (its header says {width}x{height} pixels)", _SAVE_FIX)
+    if limit is not None and width * height > limit:
+        fail(
+            f"image {path} declares {width}x{height} pixels, over the {limit} pixels that may be decoded "
+            "(a decompression bomb, or an image far larger than a scene needs)",
+            "downscale the image before training",
+        )
+    check_fits(
+        width * height * channels * DECODE_BYTES_PER_VALUE,
+        f"decoding the {width}x{height} 16-bit image {path}",
+        "downscale the image before training",
+    )
+
+
 def _read_png16(path: Path) -> np.ndarray:
     """Full-precision reader for 16-bit PNGs ([H, W] or [H, W, C] uint16).
 
@@ -91,9 +125,10 @@ def _read_png16(path: Path) -> np.ndarray:
     if ctype not in _PNG_CHANNELS:
         fail(f"image {path} has PNG colour type {ctype} at 16 bits, which is not supported", _SAVE_FIX)
     channels = _PNG_CHANNELS[ctype]
+    check_decode_size(path, width, height, channels)
     stride = width * channels * 2
-    try:
-        raw = np.frombuffer(zlib.decompress(b"".join(idat)), dtype=np.uint8)
+    try:  # never inflate past what the header's size needs: a small file may expand without end
+        raw = np.frombuffer(zlib.decompressobj().decompress(b"".join(idat), height * (stride + 1)), dtype=np.uint8)
     except zlib.error as err:
         fail(f"image {path} is corrupt ({err})", _SAVE_FIX)
     if raw.size < height * (stride + 1):

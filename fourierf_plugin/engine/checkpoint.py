@@ -179,13 +179,49 @@ def load_checkpoint(path: Path) -> dict[str, Any]:
             f"checkpoint {path} is unreadable (truncated or not a fourierf checkpoint): {_short(err)}",
             fix=unreadable_fix,
         ) from err
-    step = state.get("step") if isinstance(state, dict) else None
-    if not isinstance(step, int) or isinstance(step, bool):
-        raise UserError(
-            f"checkpoint {path} is not a fourierf checkpoint (expected a dict with an integer 'step')",
-            fix=unreadable_fix,
-        )
+    problem = checkpoint_problem(state)
+    if problem is not None:
+        raise UserError(f"checkpoint {path} is not a fourierf checkpoint ({problem})", fix=unreadable_fix)
     return state
+
+
+def checkpoint_problem(state: object) -> str | None:
+    """What makes a loaded object no fourierf checkpoint (None when it is one): a dict with an integer ``step`` >= 0."""
+    if not isinstance(state, dict):
+        return f"expected a dict with an integer 'step', found {type(state).__name__}"
+    step = state.get("step")
+    if not isinstance(step, int) or isinstance(step, bool):
+        return "expected a dict with an integer 'step'"
+    if step < 0:
+        return f"its step is {step}, below 0"
+    return None
+
+
+def restore_pipeline(pipeline: Any, state: dict[str, Any], path: Path) -> None:
+    """Load a checkpoint's weights into ``pipeline``; a checkpoint without them, or with another model's (missing,
+    extra or misshapen entries), is a UserError naming a few of them, not torch's paragraph."""
+    stored = state.get("pipeline")
+    model = stored.get("model") if isinstance(stored, dict) else None
+    if not isinstance(model, dict) or not all(isinstance(v, torch.Tensor) for v in model.values()):
+        raise UserError(
+            f"checkpoint {path} holds no model weights (no 'pipeline' entry with the model's tensors)",
+            fix="pass a step-*.ckpt written by fourierf-train",
+        )
+    try:
+        pipeline.load_state_dict(stored)
+    except (RuntimeError, KeyError, ValueError, TypeError) as err:
+        expected = set(pipeline.model.state_dict())
+        found = set(model)
+        missing, extra = sorted(expected - found), sorted(found - expected)
+        parts = [
+            f"missing {', '.join(missing[:3])}" if missing else "",
+            f"unknown {', '.join(extra[:3])}" if extra else "",
+        ]
+        detail = "; ".join(p for p in parts if p) or _short(err)
+        raise UserError(
+            f"checkpoint {path} does not hold this run's model ({detail})",
+            fix="pass a checkpoint of this run (its checkpoints/ folder), or the config.json it was trained with",
+        ) from err
 
 
 def load_latest_checkpoint(directory: Path) -> tuple[Path, dict[str, Any]]:

@@ -17,7 +17,7 @@ from fourierf_plugin.field_components.generator import invalid_options
 from fourierf_plugin.field_components.schedules import steps_from_fractions
 from fourierf_plugin.fields.fourier_tensorf_field import ALL_AXES
 from fourierf_plugin.models.zerorf import generator_config
-from fourierf_plugin.utils.errors import fail
+from fourierf_plugin.utils.errors import UserError, fail
 from fourierf_plugin.utils.memory import available_memory, check_fits
 
 
@@ -65,6 +65,7 @@ class Rule:
 _MODEL = "pipeline.model"
 _ACCEL = f"{_MODEL}.accel"
 RULES: tuple[Rule, ...] = (
+    Rule("seed", lambda v: int_at_least(0)(v) and v < 2**63, "an integer in 0..2^63-1", "20211202"),
     Rule("steps_per_save", int_at_least(1), "an integer >= 1", "1000"),
     Rule("log_every", int_at_least(1), "an integer >= 1", "50"),
     Rule("viewer_port", lambda v: int_at_least(1)(v) and v <= 65535, "a TCP port in 1..65535", "7007"),
@@ -221,6 +222,18 @@ def check_band_options(fourier: Any) -> None:
             )
 
 
+BAND_VALUES = ("f0_density", "f0_color", "ramp_fraction", "f_final", "f_final_color", "plane_leakage")
+"""Values of the curriculum's schedule: without the band nothing reads them."""
+
+
+def ignored_band_flags(config: Any, given: frozenset[str]) -> list[str]:
+    """The schedule flags typed (``given``: config paths) for a run whose Fourier curriculum is off, where they are
+    read by nothing (a tensorf-* preset, or ``--pipeline.model.fourier.enabled False``)."""
+    if config.pipeline.model.fourier.enabled:
+        return []
+    return [flag_of(f"{_MODEL}.fourier.{name}") for name in BAND_VALUES if f"{_MODEL}.fourier.{name}" in given]
+
+
 def check_density_axes(model: Any) -> None:
     """Filtering the density along some axes only is an option of free factor grids: refuse it for ZeroRF's field,
     whose generated factors are filtered along every axis, rather than ignore it."""
@@ -250,21 +263,53 @@ EVENT_SCHEDULES = (f"{_MODEL}.field.upsample_fractions", f"{_MODEL}.occupancy_up
 """Events placed at fractions of the run: each must land on a step inside it."""
 
 
-def check_training_options(config: Any) -> None:
-    """Raise a UserError for the first option outside its valid range (a ``TrainerConfig`` is expected)."""
+TRAINING_COPIES = 6
+"""Float32 copies of every grid value in training: the parameter, its gradient, AdamW's two moments, the filtered
+copy and its gradient."""
+
+
+def check_ranges(config: Any) -> None:
+    """A UserError for the first option outside its range (``RULES``, the iteration count, ZeroRF's generator)."""
     for rule in RULES:
         value = _lookup(config, rule.path)
         if not rule.ok(value):
             flag = flag_of(rule.path)
             fail(f"{flag} {_show(value)} is out of range: it must be {rule.needs}", f"pass e.g. {flag} {rule.example}")
     check_zerorf_options(config)
+    iters = config.max_num_iterations
+    if not (_integer(iters) and iters >= 1):
+        fail(f"--max-num-iterations must be at least 1, got {iters}", "pass a positive number")
+
+
+def check_saved_config(config: Any, path: Any) -> None:
+    """The range checks on a config read back from a run's ``config.json`` (eval, render, export), and its largest
+    grid against the memory available now: a hand-edited or damaged value fails here, naming the file, before
+    anything is allocated."""
+    try:
+        check_ranges(config)
+    except UserError as err:
+        raise UserError(
+            f"{path} holds a value out of range: {err.problem}",
+            f"restore the value the run was trained with in {path} ({err.fix}), or retrain",
+        ) from err
+    field = config.pipeline.model.field
+    voxels = max(field.n_voxels_init, field.n_voxels_final)
+    check_fits(
+        grid_values(field, voxels) * 4,
+        f"the grid of {path} ({voxels} voxels)",
+        "load the run on a machine with more memory, or restore the voxel counts it was trained with",
+    )
+
+
+def check_training_options(config: Any, copies: int = TRAINING_COPIES) -> None:
+    """Raise a UserError for the first option outside its valid range (a ``TrainerConfig`` is expected); the grid
+    must fit with ``copies`` float32 copies of each value (training's, or 1 to render a saved run)."""
+    check_ranges(config)
     check_final_cutoff(config.pipeline.model.fourier)
     check_band_options(config.pipeline.model.fourier)
     check_floaters_start(config.pipeline.model)
     check_density_axes(config.pipeline.model)
     iters = config.max_num_iterations
-    if not (_integer(iters) and iters >= 1):
-        fail(f"--max-num-iterations must be at least 1, got {iters}", "pass a positive number")
     for path in EVENT_SCHEDULES:
         fractions = _lookup(config, path)
         try:
@@ -278,12 +323,7 @@ def check_training_options(config: Any) -> None:
                 "use fractions strictly between 0 and 1 and a --max-num-iterations long enough to place them"
                 f"{needed}, or pass {flag} with no value to disable them",
             )
-    check_grid_fits(config)
-
-
-TRAINING_COPIES = 6
-"""Float32 copies of every grid value in training: the parameter, its gradient, AdamW's two moments, the filtered
-copy and its gradient."""
+    check_grid_fits(config, copies=copies)
 
 
 def grid_values(field: Any, n_voxels: float) -> float:
@@ -295,18 +335,21 @@ def grid_values(field: Any, n_voxels: float) -> float:
     return components * (side * side + side)
 
 
-def check_grid_fits(config: Any, available: int | None = None) -> None:
-    """A UserError, before anything is built, when the final grid cannot fit in the memory available now."""
+def check_grid_fits(config: Any, available: int | None = None, copies: int = TRAINING_COPIES) -> None:
+    """A UserError, before anything is built, when the largest grid of the run (the initial one or the final one,
+    whichever is larger) cannot fit in the memory available now; ``copies``: float32 copies held of each value."""
     field = config.pipeline.model.field
-    needed = grid_values(field, field.n_voxels_final) * 4 * TRAINING_COPIES
+    name = "n_voxels_init" if field.n_voxels_init > field.n_voxels_final else "n_voxels_final"
+    voxels = getattr(field, name)
+    needed = grid_values(field, voxels) * 4 * copies
     free = available_memory() if available is None else available
     if free is None or needed <= free:
         return
-    side = (free / 2 / (4 * TRAINING_COPIES * grid_values(field, 1.0) / 2)) ** 0.5  # room for the rest of the run
-    flag = flag_of(f"{_MODEL}.field.n_voxels_final")
+    side = (free / 2 / (4 * copies * grid_values(field, 1.0) / 2)) ** 0.5  # room for the rest of the run
+    flag = flag_of(f"{_MODEL}.field.{name}")
     check_fits(
         needed,
-        f"the final grid ({flag} {field.n_voxels_final})",
-        f"pass at most {flag} {int(side) ** 3} on this machine (300^3 = 27000000 is the paper's)",
+        f"the {'initial' if name == 'n_voxels_init' else 'final'} grid ({flag} {voxels})",
+        f"pass at most {flag} {int(side) ** 3} on this machine (300^3 = 27000000 is the paper's final grid)",
         free,
     )

@@ -12,7 +12,9 @@ import os
 import re
 from datetime import datetime
 from pathlib import Path
+from typing import Any
 
+from fourierf_plugin.data.dataparser_base import DataparserOutputs
 from fourierf_plugin.utils.console import warn
 from fourierf_plugin.utils.errors import UserError
 
@@ -175,3 +177,16 @@ def _pid_alive(pid: int) -> bool:
     except OSError:
         return True
     return True
+
+
+def views_record(scene: DataparserOutputs) -> dict[str, Any]:
+    """What ``views.json`` records of the training views: their names and ids, and the image size and camera
+    centres that tell a moved copy of the scene from another scene with the same file names."""
+    centres = scene.cameras.camera_to_worlds[:, :3, 3].double().tolist()
+    return {
+        "scene": scene.scene_name,
+        "train_view_ids": scene.view_ids,
+        "train_image_names": scene.image_names,
+        "train_image_size": [int(scene.cameras.width), int(scene.cameras.height)],
+        "train_camera_centres": [[round(x, 6) for x in centre] for centre in centres],
+    }

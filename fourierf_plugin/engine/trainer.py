@@ -35,7 +35,7 @@ from fourierf_plugin.engine.observers import (
 )
 from fourierf_plugin.engine.optimizers import OptimizerConfig, build_optimizer, set_learning_rates
 from fourierf_plugin.engine.option_checks import check_training_options
-from fourierf_plugin.engine.run_dir import lock_run, make_run_dir
+from fourierf_plugin.engine.run_dir import lock_run, make_run_dir, views_record
 from fourierf_plugin.exporter.marching_cubes import describe, export_field_mesh
 from fourierf_plugin.pipelines.base import Pipeline, PipelineConfig
 from fourierf_plugin.utils.console import (
@@ -210,8 +210,7 @@ class Trainer:
 
     # -- set-up ---------------------------------------------------------------------------------------------------
     def _write_views(self) -> None:
-        scene = self.pipeline.datamanager.reference_outputs
-        record = {"scene": scene.scene_name, "train_view_ids": scene.view_ids, "train_image_names": scene.image_names}
+        record = views_record(self.pipeline.datamanager.reference_outputs)
         (self.run_dir / "views.json").write_text(json.dumps(record, indent=2) + "\n")
 
     def _announce(self) -> None:

@@ -230,6 +230,11 @@ def _outputs(cfg: RenderConfig) -> list[str]:
     return chosen
 
 
+MAX_FRAMES = 100_000
+"""The most frames one render may ask for (over an hour of video at 24 fps): a count beyond it is a typo, and its
+camera path alone would fill the memory before the first frame."""
+
+
 def validate(cfg: RenderConfig) -> list[str]:
     """Every check that needs no trained run, so a typo fails in a second instead of after loading the model."""
     outputs = _outputs(cfg)
@@ -238,11 +243,11 @@ def validate(cfg: RenderConfig) -> list[str]:
     if not (math.isfinite(cfg.fps) and cfg.fps > 0):
         fail(f"--fps must be > 0, got {cfg.fps}", "use e.g. 24")
     n_frames = getattr(cfg, "n_frames", 1)
-    if n_frames < 1:
-        fail(f"--n-frames must be >= 1, got {n_frames}", "use e.g. 60")
+    if not 1 <= n_frames <= MAX_FRAMES:
+        fail(f"--n-frames must be in 1..{MAX_FRAMES}, got {n_frames}", "use e.g. 60 (2.5 s at 24 fps)")
     steps = getattr(cfg, "steps_per_transition", 1)
-    if steps < 1:
-        fail(f"--steps-per-transition must be >= 1, got {steps}", "use e.g. 10")
+    if not 1 <= steps <= MAX_FRAMES:
+        fail(f"--steps-per-transition must be in 1..{MAX_FRAMES}, got {steps}", "use e.g. 10")
     if isinstance(cfg, RenderArc) and not (math.isfinite(cfg.span_scale) and cfg.span_scale >= 0):
         fail(f"--span-scale must be >= 0, got {cfg.span_scale}", "use 1 for the cameras' own range")
     if cfg.depth_near is not None and cfg.depth_far is not None and not cfg.depth_near < cfg.depth_far:
@@ -334,6 +339,14 @@ def build_cameras(cfg: RenderConfig, run: LoadedRun) -> tuple[Cameras, list[str]
     try:
         if isinstance(cfg, RenderInterpolate):
             source = reference if cfg.split == "train" else datamanager.parser.get_outputs(cfg.split)
+            frames = (len(source.cameras) - 1) * cfg.steps_per_transition + 1
+            if frames > MAX_FRAMES:
+                most = max(1, (MAX_FRAMES - 1) // max(1, len(source.cameras) - 1))
+                fail(
+                    f"--steps-per-transition {cfg.steps_per_transition} through {len(source.cameras)} cameras makes "
+                    f"{frames} frames, over the {MAX_FRAMES} one render may hold",
+                    f"pass at most --steps-per-transition {most}",
+                )
             cameras = interpolate_path(source.cameras, cfg.steps_per_transition, cfg.order_poses)
         elif isinstance(cfg, RenderArc):
             _, span = captured_range(reference.cameras.centers, target, up)

@@ -38,7 +38,7 @@ def build_config(config: TrainerConfig, given: frozenset[str] = frozenset()) -> 
     if config.time_budget is not None:
         check_time_budget(config, given)
     if config.load_dir is not None:
-        ignored = ignored_on_resume(config)
+        ignored = ignored_on_resume(config, given)
         if ignored:
             fail(
                 f"{' '.join(ignored)} would be ignored: a resumed run continues with its own saved config "

@@ -33,6 +33,8 @@ def read_json_object(path: Path, fix: str, holds: str) -> dict[str, Any]:
         content: Any = json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as err:
         fail(f"{path} is not valid JSON: {err.msg} at line {err.lineno}, column {err.colno}", fix)
+    except RecursionError:
+        fail(f"{path} nests its JSON too deeply to be read (a damaged or hostile file)", fix)
     except (UnicodeDecodeError, OSError) as err:
         fail(f"cannot read {path}: {err}", fix)
     if not isinstance(content, dict):

@@ -60,7 +60,9 @@ def test_run_directory_layout(run: Run) -> None:
     assert d.parent.name == "fourierf-vm" and d.parent.parent.name == "lego_tiny"
     assert (d / "config.json").is_file()
     views = json.loads((d / "views.json").read_text())
-    assert views == {"scene": "lego_tiny", "train_view_ids": TINY_TRAIN_IDS, "train_image_names": TINY_TRAIN_NAMES}
+    named = {"scene": "lego_tiny", "train_view_ids": TINY_TRAIN_IDS, "train_image_names": TINY_TRAIN_NAMES}
+    assert {k: views[k] for k in named} == named
+    assert views["train_image_size"] == [100, 100] and len(views["train_camera_centres"]) == len(TINY_TRAIN_IDS)
     checkpoints = list_checkpoints(d / "checkpoints")
     assert checkpoints and checkpoints[-1].name == f"step-{ITERS:09d}.ckpt"
 

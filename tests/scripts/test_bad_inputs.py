@@ -14,7 +14,9 @@ import copy
 import json
 import os
 import shutil
+import struct
 import subprocess
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,9 +24,12 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 import pytest
+import torch
 
+from fourierf_plugin.data.parsers.blender import BlenderDataParserConfig
+from fourierf_plugin.data.parsers.llff import LLFFDataParserConfig
 from fourierf_plugin.engine.option_checks import check_training_options
-from fourierf_plugin.method_configs import all_methods
+from fourierf_plugin.method_configs import all_methods, finalize
 from fourierf_plugin.method_configs.scene_presets import apply_real_scene_preset
 from fourierf_plugin.scripts import eval as eval_script
 from fourierf_plugin.scripts import export as export_script
@@ -198,6 +203,89 @@ def empty_colmap_model(tmp: Path) -> Path:
     write(model / "points3D.txt", "")
     (tmp / "colmap_scene" / "images").mkdir()
     return tmp / "colmap_scene"
+
+
+# -- issue 85: resume, memory and decode guards, tracebacks made errors ---------------------------------------------
+def shifted_scene(tmp: Path) -> Path:
+    """The bundled scene's files under the same names and sizes, every camera moved: another scene to a run."""
+
+    def shift(meta: dict) -> None:
+        for frame in meta["frames"]:
+            frame["transform_matrix"][0][3] += 0.5
+
+    return edit_transforms(blender(tmp), "train", shift)
+
+
+def deeply_nested(depth: int = 100_000) -> str:
+    return "[" * depth + "]" * depth
+
+
+def llff_with(tmp: Path, edit: Callable[[np.ndarray], np.ndarray]) -> Path:
+    """An LLFF scene whose poses_bounds.npy array is replaced by ``edit(array)``."""
+    scene = llff(tmp)
+    return np_saved(scene / "poses_bounds.npy", edit(np.load(scene / "poses_bounds.npy")))
+
+
+def with_column(column: int, value: float) -> Callable[[np.ndarray], np.ndarray]:
+    def edit(array: np.ndarray) -> np.ndarray:
+        array[:, column] = value
+        return array
+
+    return edit
+
+
+def png16_header_only(path: Path, width: int, height: int) -> Path:
+    """A 16-bit RGBA PNG whose header declares ``width`` x ``height`` pixels over a few bytes of pixel data."""
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+    header = struct.pack(">IIBBBBB", width, height, 16, 6, 0, 0, 0)
+    data = (
+        b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(bytes(1000))) + chunk(b"IEND", b"")
+    )
+    return write(path, data)
+
+
+def bomb_scene(tmp: Path) -> Path:
+    scene = blender(tmp)
+    png16_header_only(scene / "train" / "r_27.png", 40_000, 40_000)
+    return scene
+
+
+def edited_checkpoint(edit: Callable[[dict], object]) -> Callable[[Path, Path], list[str]]:
+    """``--checkpoint`` of a copy of the run's newest checkpoint after ``edit(state)`` (``--force-checkpoint``)."""
+
+    def build(tmp: Path, cfg: Path) -> list[str]:
+        newest = sorted((cfg.parent / "checkpoints").glob("step-*.ckpt"))[-1]
+        state = torch.load(newest, map_location="cpu", weights_only=True)
+        edit(state)
+        torch.save(state, tmp / "edited.ckpt")
+        return ["--checkpoint", str(tmp / "edited.ckpt"), "--force-checkpoint"]
+
+    return build
+
+
+def drop_a_weight(state: dict) -> None:
+    model = state["pipeline"]["model"]
+    del model[sorted(model)[0]]
+
+
+def add_a_weight(state: dict) -> None:
+    state["pipeline"]["model"]["foreign.weight"] = torch.zeros(3)
+
+
+def config_value(path: str, value: object) -> Callable[[dict], None]:
+    """Sets ``path`` (dotted, inside the saved config) in a config.json payload."""
+
+    def edit(payload: dict) -> None:
+        node = payload["config"]
+        *parents, last = path.split(".")
+        for part in parents:
+            node = node[part]
+        node[last] = value
+
+    return edit
 
 
 # -- command lines --------------------------------------------------------------------------------------------------
@@ -584,6 +672,83 @@ CASES: dict[str, Case] = {
         lambda tmp, _: train_on(empty_colmap_model(tmp), tmp, "colmap-data"),
         ("colmap/sparse/0", "no registered images"),
     ),
+    # -- issue 85 ----------------------------------------------------------------------------------------------------
+    "train: --seed -1": out_of_range("--seed", "-1", "0..2^63-1"),
+    "train: --seed 1e23 written out": out_of_range("--seed", "100000000000000000000000", "0..2^63-1"),
+    "train: an initial grid larger than the memory": Case(
+        "train",
+        train_with(f"{MODEL}.field.n-voxels-init", "1000000000000"),
+        (f"{MODEL}.field.n-voxels-init 1000000000000", "initial grid", "GiB", "pass at most"),
+    ),
+    "train: resume with a flag equal to the preset's default": Case(
+        "train",
+        lambda tmp, cfg: [*resume(intact)(tmp, cfg), "--max-num-iterations", "10000"],
+        ("--max-num-iterations would be ignored", "its own saved config"),
+    ),
+    "train: resume with --data of another scene": Case(
+        "train",
+        lambda tmp, cfg: [*resume(intact)(tmp, cfg), "--data", str(shifted_scene(tmp))],
+        ("is not the scene the run", "training cameras at other positions", "start a new run"),
+    ),
+    "train: deeply nested transforms JSON": Case(
+        "train",
+        lambda tmp, _: train_on(write(blender(tmp) / "transforms_train.json", deeply_nested()).parent, tmp),
+        ("transforms_train.json", "nests its JSON too deeply"),
+    ),
+    "train: an LLFF pose array of strings": Case(
+        "train",
+        lambda tmp, _: train_on(np_saved(llff(tmp) / "poses_bounds.npy", np.full((10, 17), "a")), tmp, "llff-data"),
+        ("poses_bounds.npy", "<U1 values, not real numbers"),
+    ),
+    "train: a zero focal length in poses_bounds.npy": Case(
+        "train",
+        lambda tmp, _: train_on(llff_with(tmp, with_column(14, 0.0)), tmp, "llff-data"),
+        ("poses_bounds.npy", "focal length of 0 or below", "re-run pose estimation"),
+    ),
+    "train: a 16-bit PNG declaring 40000x40000 pixels": Case(
+        "train", lambda tmp, _: train_on(bomb_scene(tmp), tmp), ("r_27.png", "40000x40000", "decompression bomb")
+    ),
+    "eval: deeply nested config JSON": Case(
+        "eval",
+        on_run(EVAL, lambda cfg, tmp: write(copy_run(cfg, tmp), deeply_nested())),
+        ("nests its JSON too deeply",),
+    ),
+    "train: resume a config.json with a value out of range": Case(
+        "train",
+        resume(lambda cfg, tmp: with_config(cfg, tmp, config_value("pipeline.model.step_ratio", 0))),
+        ("config.json holds a value out of range", "step-ratio 0"),
+    ),
+    "eval: a config.json value out of range": Case(
+        "eval",
+        on_run(EVAL, lambda cfg, tmp: with_config(cfg, tmp, config_value("seed", -1))),
+        ("config.json holds a value out of range", "--seed -1", "restore the value"),
+    ),
+    "render: a config.json grid larger than the memory": Case(
+        "render",
+        on_run(
+            RENDER, lambda cfg, tmp: with_config(cfg, tmp, config_value("pipeline.model.field.n_voxels_final", 10**15))
+        ),
+        ("config.json", "GiB", "more memory"),
+    ),
+    "eval: a checkpoint with a negative step": Case(
+        "eval", on_run(EVAL, extra=edited_checkpoint(lambda state: state.update(step=-5))), ("edited.ckpt", "below 0")
+    ),
+    "eval: a checkpoint missing a weight": Case(
+        "eval", on_run(EVAL, extra=edited_checkpoint(drop_a_weight)), ("does not hold this run's model", "missing")
+    ),
+    "eval: a checkpoint with a foreign weight": Case(
+        "eval", on_run(EVAL, extra=edited_checkpoint(add_a_weight)), ("unknown foreign.weight",)
+    ),
+    "export: a checkpoint without model weights": Case(
+        "export",
+        on_run(EXPORT, extra=edited_checkpoint(lambda state: state.pop("pipeline"))),
+        ("edited.ckpt", "holds no model weights"),
+    ),
+    "render: --n-frames of a billion": Case(
+        "render",
+        on_run(["orbit", "--load-config", "{config}", "--output-dir", "{tmp}/r", "--n-frames", "1000000000"]),
+        ("--n-frames must be in 1..100000", "1000000000"),
+    ),
 }
 
 
@@ -670,3 +835,70 @@ def test_16bit_and_grayscale_images_are_accepted(tmp_path: Path, capsys: pytest.
     run_cli(lambda: train_script.main(train_on(scene, tmp_path, iters=6)), [])
     assert len(run_dirs(tmp_path / "out")) == 1
     assert "error:" not in capsys.readouterr().err
+
+
+# -- accepted, with a warning (issue 85, item 7) ----------------------------------------------------------------------
+def set_pose(index: int, edit: Callable[[list], None]) -> Callable[[dict], None]:
+    return lambda meta: edit(meta["frames"][index]["transform_matrix"])
+
+
+def far_camera(matrix: list) -> None:
+    matrix[0][3] = 1e30
+
+
+def skewed_bottom_row(matrix: list) -> None:
+    matrix[3] = [0.0, 0.0, 0.1, 1.0]
+
+
+def duplicate_frame(meta: dict) -> None:
+    meta["frames"].append(copy.deepcopy(meta["frames"][0]))
+
+
+def parse_blender(scene: Path) -> None:
+    BlenderDataParserConfig(data=scene).setup().get_outputs("train")
+
+
+def parse_llff(scene: Path) -> None:
+    LLFFDataParserConfig(data=scene).setup().get_outputs("train")
+
+
+def band_flag_without_band(tmp: Path) -> None:
+    args = [*train_on(TINY_SCENE, tmp, f"{MODEL}.fourier.f0-density", "0.5")]
+    args[0] = "tensorf-vm"
+    finalize(train_script.parse_args(args), train_script.given_options(args))
+
+
+WARNED: dict[str, tuple[Callable[[Path], None], tuple[str, ...]]] = {
+    "a camera at 1e30": (
+        lambda tmp: parse_blender(edit_transforms(blender(tmp), "train", set_pose(1, far_camera))),
+        ("frame 1", "1e+30", "farther from the cameras' centre"),
+    ),
+    "a transform whose bottom row is not (0, 0, 0, 1)": (
+        lambda tmp: parse_blender(edit_transforms(blender(tmp), "train", set_pose(2, skewed_bottom_row))),
+        ("frame 2", "bottom row is not (0, 0, 0, 1)", "top 3x4"),
+    ),
+    "a negative focal in poses_bounds.npy": (
+        lambda tmp: parse_llff(llff_with(tmp, with_column(14, -400.0))),
+        ("negative focal length", "mirrored"),
+    ),
+    "duplicate Blender frames": (
+        lambda tmp: parse_blender(edit_transforms(blender(tmp), "train", duplicate_frame)),
+        ("frames 0 and 4 both name", "counts twice"),
+    ),
+    "tensorf-vm with an initial Fourier cutoff": (
+        band_flag_without_band,
+        (f"{MODEL}.fourier.f0-density", "curriculum, which is off", "tensorf-vm", "ignored"),
+    ),
+}
+
+
+@pytest.mark.parametrize("name", list(WARNED))
+def test_a_likely_mistake_is_accepted_with_a_warning(
+    name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    accept, expected = WARNED[name]
+    accept(tmp_path)
+    flat = " ".join(capsys.readouterr().err.split())
+    assert "warning:" in flat
+    for text in expected:
+        assert text in flat, f"{text!r} missing from:\n{flat}"

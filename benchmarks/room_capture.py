@@ -29,6 +29,7 @@ from harness import (
     update_benchmarks_md,
 )
 
+from fourierf_plugin.bench.phases import done_record, read_metrics
 from fourierf_plugin.utils.geometry import chamfer_distance, mesh_surface_points
 
 REPO = Path(__file__).resolve().parents[1]
@@ -82,14 +83,8 @@ def mesh_scores(run_dir: Path, work: Path, key: str, room: Path) -> dict:
 
 def finished_training(run_dir: Path) -> float | None:
     """The training seconds of a run that finished in ``run_dir`` (its ``done`` record), else None."""
-    metrics = run_dir / "metrics.jsonl"
-    if not metrics.is_file():
-        return None
-    for line in reversed(metrics.read_text().splitlines()):
-        record = json.loads(line) if line.strip() else {}
-        if record.get("event") == "done":
-            return float(record["train_seconds"])
-    return None
+    done = done_record(read_metrics(run_dir / "metrics.jsonl"))
+    return None if done is None else float(done["train_seconds"])
 
 
 def execute(run: Run, room: Path, work: Path, lpips: Path, threads: int | None) -> dict:

@@ -54,7 +54,7 @@ def test_the_check_finds_history_and_spares_the_legitimate_senses() -> None:
         f"# {word.title()} 12: the levers left",
         f"measured in {word}s 36-39",
         f"the rule of {word} forty 2",
-        "Ctrl-C, or a closed SSH session 2 minutes in",
+        f"Ctrl-C, or a closed SSH {word} 2 minutes in",
         '@pytest.fixture(scope="session")',
         "the viewer's websocket session",
     ]

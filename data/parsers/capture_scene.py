@@ -138,20 +138,24 @@ def decide_scene_kind(capture: Capture) -> KindDecision:
     )
 
 
+def _in_view(points: np.ndarray, pose: np.ndarray, k: Intrinsics) -> tuple[np.ndarray, np.ndarray]:
+    """Each point's depth in front of a camera (OpenGL, looking down -z) and whether it projects inside its image
+    (distortion left out: callers take percentiles or counts)."""
+    local = (points - pose[:, 3]) @ pose[:, :3]
+    depth = -local[:, 2]
+    front = depth > 1e-9
+    safe = np.where(front, depth, 1.0)
+    u = k.fx * local[:, 0] / safe + k.cx
+    v = -k.fy * local[:, 1] / safe + k.cy
+    return depth, front & (u >= 0) & (u <= k.width) & (v >= 0) & (v <= k.height)
+
+
 def _depths_seen(capture: Capture, points: np.ndarray) -> list[np.ndarray]:
-    """Per frame, the depths of the points in front of the camera that project inside its image (distortion left
-    out: only percentiles are taken)."""
+    """Per frame, the depths of the points in front of the camera that project inside its image."""
     seen = []
     for frame in capture.frames:
-        c2w = np.asarray(frame.camera_to_world, dtype=np.float64)[:3, :4]
-        local = (points - c2w[:, 3]) @ c2w[:, :3]  # camera coordinates, OpenGL: looking down -z
-        depth = -local[:, 2]
-        front = depth > 1e-9
-        k = frame.intrinsics
-        u = k.fx * local[front, 0] / depth[front] + k.cx
-        v = -k.fy * local[front, 1] / depth[front] + k.cy
-        inside = (u >= 0) & (u <= k.width) & (v >= 0) & (v <= k.height)
-        seen.append(depth[front][inside])
+        depth, inside = _in_view(points, np.asarray(frame.camera_to_world, dtype=np.float64)[:3, :4], frame.intrinsics)
+        seen.append(depth[inside])
     return seen
 
 
@@ -264,14 +268,7 @@ def normalise_unbounded(capture: Capture, orientation: Orientation) -> Normalise
 def _box_seen_by_most(c2w: np.ndarray, capture: Capture, points: np.ndarray) -> np.ndarray | None:
     """The object's box of an unbounded scene: the sparse points in front of and inside the image of at least
     ``SEEN_BY_SHARE`` of the cameras (robust percentiles, padded), cut to the inner cube; None with too few."""
-    seen = np.zeros(len(points), dtype=np.int64)
-    for pose, k in zip(c2w, _intrinsics(capture), strict=True):
-        local = (points - pose[:, 3]) @ pose[:, :3]  # camera coordinates, OpenGL: looking down -z
-        depth = -local[:, 2]
-        safe = np.where(depth > 1e-9, depth, 1.0)
-        u = k.fx * local[:, 0] / safe + k.cx
-        v = -k.fy * local[:, 1] / safe + k.cy
-        seen += (depth > 1e-9) & (u >= 0) & (u <= k.width) & (v >= 0) & (v <= k.height)
+    seen = sum(_in_view(points, pose, k)[1].astype(np.int64) for pose, k in zip(c2w, _intrinsics(capture), strict=True))
     kept = points[seen >= SEEN_BY_SHARE * len(c2w)]
     if len(kept) < MIN_BOX_POINTS:
         return None

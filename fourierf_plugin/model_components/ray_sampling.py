@@ -153,16 +153,17 @@ def _inner_exit(origins: Tensor, directions: Tensor, near: float, far: float) ->
     return ray_aabb_intersect(origins, directions, inner)[1].clamp(min=near, max=far).unsqueeze(-1)
 
 
-def contracted_arc_table(origins: Tensor, directions: Tensor, near: float, far: float) -> tuple[Tensor, Tensor]:
-    """Per ray, ray parameters [R, 2K+1] from ``near`` to ``far`` (``_table_t`` at whole indices) and the length of
-    the contracted ray up to each: the table :func:`contracted_samples` inverts."""
+def contracted_arc_table(origins: Tensor, directions: Tensor, near: float, far: float) -> tuple[Tensor, Tensor, Tensor]:
+    """Per ray, ray parameters [R, 2K+1] from ``near`` to ``far`` (``_table_t`` at whole indices), the length of
+    the contracted ray up to each, and where the ray leaves the inner cube [R, 1]: what :func:`contracted_samples`
+    inverts."""
     t_exit = _inner_exit(origins, directions, near, far)
     index = torch.arange(2 * ARC_TABLE_POINTS + 1, device=origins.device, dtype=origins.dtype)
     t = _table_t(index.expand(origins.shape[0], -1), t_exit, near, far)
     points = contract(_points(origins, directions, t))
     steps = (points[:, 1:] - points[:, :-1]).norm(dim=-1)
     length = torch.cat([torch.zeros_like(t[:, :1]), steps.cumsum(dim=-1)], dim=-1)
-    return t, length
+    return t, length, t_exit
 
 
 def contracted_samples(
@@ -179,7 +180,7 @@ def contracted_samples(
     contracted space (one random shift per ray in training), so samples are as dense in the far shell as in the inner
     cube; the points are the contracted positions the grid (``aabb`` ⊆ [-2, 2]³) covers, the intervals metric ones."""
     num_rays = origins.shape[0]
-    table_t, table_length = contracted_arc_table(origins, directions, near, far)
+    table_t, table_length, t_exit = contracted_arc_table(origins, directions, near, far)
     span = table_length[:, -1]
     needed = math.ceil(float(span.max()) / step) + 1 if num_rays else 0
     num_samples = max(1, min(max_samples, needed))
@@ -190,7 +191,7 @@ def contracted_samples(
     upper = torch.searchsorted(table_length, length, right=True).clamp(1, table_t.shape[1] - 1)
     l0, l1 = table_length.gather(1, upper - 1), table_length.gather(1, upper)
     index = (upper - 1) + (length - l0) / (l1 - l0).clamp(min=1e-12)
-    t = _table_t(index, _inner_exit(origins, directions, near, far), near, far)
+    t = _table_t(index, t_exit, near, far)
     points = contract(_points(origins, directions, t))
     inside = within & ((points >= aabb[0]) & (points <= aabb[1])).all(dim=-1)
     return RaySamples(t, sample_deltas(t), points, inside, directions)

@@ -428,6 +428,8 @@ CASES: dict[str, Case] = {
     "train: negative distortion weight": out_of_range(f"{MODEL}.distortion-weight", "-0.01", ">= 0"),
     "train: zero depth-smoothness patches": out_of_range(f"{MODEL}.depth-smoothness-patches", "0", ">= 1"),
     "train: negative entropy weight": out_of_range(f"{MODEL}.entropy-weight", "-0.001", ">= 0"),
+    "train: negative feature frequencies": out_of_range(f"{MODEL}.field.feature-frequencies", "-1", ">= 0"),
+    "train: negative view frequencies": out_of_range(f"{MODEL}.field.view-frequencies", "-2", ">= 0"),
     "train: an entropy threshold past full opacity": out_of_range(f"{MODEL}.entropy-threshold", "1.5", "[0, 1]"),
     "train: negative unseen rays for the entropy": out_of_range(f"{MODEL}.entropy-unseen-rays", "-3", ">= 0"),
     "train: floaters scaling from past the run": out_of_range(

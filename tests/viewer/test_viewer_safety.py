@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 
 from fourierf_plugin.scripts.viewer import ViewerConfig, ViewerHandle, serve
-from fourierf_plugin.viewer.server import MESH_FILES_PER_RUN, mesh_refusal, open_server
+from fourierf_plugin.utils.errors import UserError
+from fourierf_plugin.viewer.server import MESH_FILES_PER_RUN, check_host, mesh_refusal, open_server
 from tests.conftest import require_module
 
 VISER_WHY = "the viewer needs viser (pip install '.[viewer]')"
@@ -135,3 +136,10 @@ def test_a_second_mesh_at_once_is_refused(viewer: ViewerHandle) -> None:
     first = view.export_mesh()
     assert first is not None and view.export_mesh() is None
     first.unlink()
+
+
+def test_a_host_that_is_no_address_is_one_clear_error() -> None:
+    require_module("viser", VISER_WHY)
+    with pytest.raises(UserError, match=r"--viewer-host 'no-such-host\.invalid' is not an address") as info:
+        check_host("no-such-host.invalid", "--viewer-host")
+    assert "--viewer-host 127.0.0.1" in str(info.value.fix)

@@ -1,9 +1,10 @@
-"""``fourierf-render [auto|interpolate|arc|orbit|spiral|dataset] --load-config RUN/config.json``: novel views as PNG
-frames and animations.
+"""``fourierf-render [auto|interpolate|arc|orbit|spiral|dataset|camera-path] --load-config RUN/config.json``: novel
+views as PNG frames and animations.
 
 ``interpolate`` moves through the training cameras, ``arc`` sweeps the angular range they cover about the scene's
 centre, ``orbit`` is a Blender-style turntable and ``spiral`` the LLFF spiral, both aimed at the scene's centre;
-``dataset`` renders a split's own cameras (named after the views). ``auto`` (also what runs when no mode is named)
+``dataset`` renders a split's own cameras (named after the views), ``camera-path`` a camera_path.json (nerfstudio's
+format, as the viewer saves it). ``auto`` (also what runs when no mode is named)
 picks an orbit when the training cameras surround the scene and the interpolated path otherwise, so a partial capture
 is only shown from where it was photographed. Every requested output (rgb, depth coloured by a perceptual colormap,
 accumulation) is written as ``DIR/<output>/<frame>.png`` plus ``DIR/<output>.gif`` (and ``.mp4`` when the optional
@@ -29,6 +30,7 @@ import tyro
 from rich.markup import escape
 from torch import Tensor
 
+from fourierf_plugin.cameras.camera_path import read_camera_path
 from fourierf_plugin.cameras.camera_paths import (
     arc_path,
     captured_range,
@@ -180,6 +182,21 @@ class RenderSpiral(RenderConfig):
         return "spiral"
 
 
+@dataclass
+class RenderCameraPath(RenderConfig):
+    """A camera path saved by the viewer's render button, or by nerfstudio's viewer (its camera_path.json format):
+    its frames, image size and frame rate."""
+
+    camera_path_filename: Path | None = None
+    """The camera_path.json to render (the viewer writes them to RUN/camera_paths/)."""
+    fps: float | None = None  # type: ignore[assignment]
+    """Frame rate of the animations (default: the path's own)."""
+
+    @property
+    def mode(self) -> str:
+        return "camera-path"
+
+
 _MISSING = tyro.MISSING
 if TYPE_CHECKING:
     RenderCommand = RenderConfig
@@ -192,6 +209,7 @@ else:
             "orbit": RenderOrbit(load_config=_MISSING),
             "spiral": RenderSpiral(load_config=_MISSING),
             "dataset": RenderDataset(load_config=_MISSING),
+            "camera-path": RenderCameraPath(load_config=_MISSING, camera_path_filename=_MISSING),
         },
         {
             "auto": "The path that fits the capture: orbit when the cameras surround it, else interpolate "
@@ -201,6 +219,7 @@ else:
             "orbit": "Render a turntable around the scene's centre (captures all around an object).",
             "spiral": "Render the LLFF spiral, aimed at the scene's centre (forward-facing scenes).",
             "dataset": "Render the cameras of a dataset split (test by default).",
+            "camera-path": "Render a camera_path.json saved by the viewer (nerfstudio's format).",
         },
         prefix_names=False,
         sort_subcommands=False,
@@ -238,6 +257,11 @@ camera path alone would fill the memory before the first frame."""
 def validate(cfg: RenderConfig) -> list[str]:
     """Every check that needs no trained run, so a typo fails in a second instead of after loading the model."""
     outputs = _outputs(cfg)
+    if isinstance(cfg, RenderCameraPath):
+        if cfg.camera_path_filename is None:
+            fail("camera-path needs --camera-path-filename", "pass the camera_path.json the viewer wrote")
+        if cfg.fps is None:
+            cfg.fps = read_camera_path(cfg.camera_path_filename, MAX_FRAMES).fps  # the path's own frame rate
     if not (math.isfinite(cfg.resolution_scale) and cfg.resolution_scale > 0):
         fail(f"--resolution-scale must be > 0, got {cfg.resolution_scale}", "use e.g. 0.5 for half size")
     if not (math.isfinite(cfg.fps) and cfg.fps > 0):
@@ -314,6 +338,10 @@ def build_cameras(cfg: RenderConfig, run: LoadedRun) -> tuple[Cameras, list[str]
     """The cameras of the chosen mode (before resolution scaling), a file stem per frame, and the mode rendered
     (``auto`` resolved)."""
     datamanager = run.pipeline.datamanager
+    if isinstance(cfg, RenderCameraPath):
+        assert cfg.camera_path_filename is not None  # validate() checked it
+        cameras = read_camera_path(cfg.camera_path_filename, MAX_FRAMES).cameras
+        return cameras, _frame_stems(cameras), cfg.mode
     if isinstance(cfg, RenderDataset):
         outputs = datamanager.parser.get_outputs(cfg.split)
         if len(outputs.cameras) == 0:

@@ -13,8 +13,9 @@ keeps the preset's values at any budget.
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import MappingProxyType
 from typing import Any
 
@@ -204,6 +205,17 @@ RULES: tuple[Rule, ...] = (
 def rules_for(run: Run) -> list[Rule]:
     """The rows that apply to ``run``, in table order."""
     return [rule for rule in RULES if rule.applies(run)]
+
+
+def rule_span(run: Run) -> tuple[int, int]:
+    """The half-open range of iteration counts around ``run.iterations`` under which the same rows apply to ``run``
+    (``sys.maxsize`` where no row bounds it from above)."""
+    edges = {
+        edge for rule in RULES if rule.applies(replace(run, iterations=rule.iterations[0])) for edge in rule.iterations
+    }
+    lower = [edge for edge in edges if edge <= run.iterations]
+    upper = [edge for edge in edges if edge > run.iterations]
+    return max(lower, default=0), min(upper, default=sys.maxsize)
 
 
 def short_run_settings(run: Run) -> dict[str, Any]:

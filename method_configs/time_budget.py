@@ -12,6 +12,7 @@ from __future__ import annotations
 import copy
 import math
 import re
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -22,7 +23,7 @@ from fourierf_plugin.engine.estimates import checkpoint_bytes, run_shape, save_s
 from fourierf_plugin.engine.machine import pick_device, seed_everything
 from fourierf_plugin.engine.optimizers import build_optimizer
 from fourierf_plugin.engine.trainer import TrainerConfig, optimisation_step
-from fourierf_plugin.method_configs.budget import Run, rules_for
+from fourierf_plugin.method_configs.budget import Run, rule_span
 from fourierf_plugin.utils.console import format_duration
 from fourierf_plugin.utils.errors import fail
 
@@ -34,7 +35,7 @@ MIN_ITERATIONS = 100
 """The shortest run a budget may pick: below it the schedules' events crowd together and the field barely forms."""
 WARMUP_STEPS, TIMED_STEPS = 2, 8
 """Steps of the calibration copy run before timing (allocations, first-call costs) and then timed."""
-MAX_ROUNDS = 3
+MAX_ROUNDS = 4
 """Calibrations at most: a count that changes which short-run rules apply is timed again with those rules."""
 
 _DURATION = re.compile(r"(?:(?P<h>\d+(?:\.\d+)?)h)?(?:(?P<m>\d+(?:\.\d+)?)m)?(?:(?P<s>\d+(?:\.\d+)?)s)?")
@@ -147,32 +148,42 @@ def plan_run(
     measure: Callable[[TrainerConfig], float] | None = None,
 ) -> Plan:
     """The plan for ``config``'s ``--time-budget``: ``finish`` completes a copy set to a trial count the way
-    ``finalize`` completes the run (short-run rules, scene effects); the copy at that count is timed with ``measure``
-    (default ``measure_first_steps``),
-    and timed again with other rules where the count it gives changes which rules apply (on a scene that declares
-    ``background``)."""
+    ``finalize`` completes the run (short-run rules, scene effects); the copy is timed with ``measure`` (default
+    ``measure_first_steps``). A count is only planned from the cost of a copy under the same short-run rules (a rule
+    can change an iteration's cost), so a count that falls under other rules is timed again under those; where the
+    rules' ranges and the costs disagree, the plan is the longest run that fits under rules that were timed."""
     assert config.time_budget is not None
     budget_s = parse_duration(config.time_budget)
     measure = measure or measure_first_steps
     started = time.perf_counter()
-    iterations, tried = config.max_num_iterations, set()
+    iterations, timed_spans, fits = config.max_num_iterations, set(), []
     for _ in range(MAX_ROUNDS):
         trial = copy.deepcopy(config)
         trial.max_num_iterations = iterations
         finish(trial)
         cost = run_cost(trial, measure(trial))
+        low, high = _span(trial, iterations, background)
+        timed_spans.add((low, high))
         planned = plan_iterations(budget_s, cost)
-        tried.add(iterations)
-        if _rule_names(trial, planned, background) == _rule_names(trial, iterations, background) or planned in tried:
+        if planned >= low:  # the longest count under these rules that fits
+            fits.append((min(planned, high - 1), cost))
+        if low <= planned < high or _span(trial, planned, background) in timed_spans:
             break
         iterations = planned
+    if not fits:
+        fail(
+            f"{FLAG} {config.time_budget}: no run under the short-run rules it was timed with fits the budget",
+            f"pass a longer {FLAG}, or --max-num-iterations N instead",
+        )
+    planned, cost = max(fits, key=lambda fit: fit[0])
     return Plan(budget_s, planned, cost, time.perf_counter() - started)
 
 
-def _rule_names(config: TrainerConfig, iterations: int, background: str) -> list[str]:
+def _span(config: TrainerConfig, iterations: int, background: str) -> tuple[int, int]:
+    """The counts around ``iterations`` that ``config`` would run under the same short-run rules."""
     if not config.budget_rule:
-        return []
-    return [rule.name for rule in rules_for(replace(Run.of(config, background), iterations=iterations))]
+        return 0, sys.maxsize
+    return rule_span(replace(Run.of(config, background), iterations=iterations))
 
 
 def apply_time_budget(

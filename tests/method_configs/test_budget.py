@@ -6,6 +6,7 @@ from __future__ import annotations
 import copy
 import itertools
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -20,6 +21,7 @@ from fourierf_plugin.method_configs.budget import (
     AtStep,
     Rule,
     Run,
+    rule_span,
     rules_for,
 )
 from fourierf_plugin.method_configs.presets import descriptions
@@ -101,6 +103,19 @@ def test_every_setting_is_a_field_of_the_presets_it_applies_to() -> None:
     for rule in RULES:
         for path in rule.settings:
             get(preset, path)  # raises where the path names no field
+
+
+def test_a_span_holds_the_same_rows_and_ends_where_they_change() -> None:
+    for run in every_run():
+        low, high = rule_span(run)
+        assert low <= run.iterations < high
+        names = [rule.name for rule in rules_for(run)]
+        inside = {low, run.iterations, high - 1} if high < PAPER_ITERATIONS * 10 else {low, run.iterations}
+        assert all([r.name for r in rules_for(replace(run, iterations=n))] == names for n in inside)
+        if low > 0:
+            assert [r.name for r in rules_for(replace(run, iterations=low - 1))] != names
+        if high < PAPER_ITERATIONS * 10:
+            assert [r.name for r in rules_for(replace(run, iterations=high))] != names
 
 
 def test_a_fraction_at_a_step_lands_on_that_step_at_every_length() -> None:

@@ -124,3 +124,25 @@ def test_the_budget_is_recorded_and_the_estimate_line_shows_the_plan(monkeypatch
     config, _ = finalize(parse_args(args), given_options(args))
     assert config.time_budget == "90s" and 0 < config.planned_train_seconds <= 90 * (1 - MARGIN)
     assert "planned training time" in describe_cost(config, 1000, 2, cpu=True)
+
+
+def test_a_count_is_planned_only_from_a_cost_timed_under_its_own_rules(monkeypatch):
+    """When the rules of a long run make it dear enough to plan a short one, and the short one's rules make it cheap
+    enough to plan a long one, the plan is the longest count that fits under rules that were timed, at their cost."""
+    from fourierf_plugin.method_configs.budget import Run, rule_span
+
+    monkeypatch.setattr(time_budget, "save_seconds", lambda size: 0.0)
+    monkeypatch.setattr(time_budget, "run_shape", lambda config: 1.0)
+    args = ["fourierf-vm", "--data", str(TINY_SCENE), "--device", "cpu"]
+    short = finalize(parse_args([*args, "--max-num-iterations", "500"]), given_options(args))[0]
+    boundary = rule_span(Run.of(short, "white"))[1]  # the first count under the longer runs' rules
+    assert boundary < 10_000
+    dear, cheap = per_iteration_for(boundary // 2, 600.0), per_iteration_for(boundary * 2, 600.0)
+
+    def measure(config):
+        return dear if config.max_num_iterations >= boundary else cheap
+
+    monkeypatch.setattr(time_budget, "measure_first_steps", measure)
+    budgeted, _ = finalize(parse_args([*args, "--time-budget", "10m"]), given_options([*args, "--time-budget"]))
+    assert budgeted.max_num_iterations == boundary - 1
+    assert budgeted.planned_train_seconds == pytest.approx((boundary - 1) * cheap)

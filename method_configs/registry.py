@@ -23,6 +23,7 @@ from fourierf_plugin.method_configs.presets import (
     fourierf_vm,
     fourierf_vm_code,
     fourierf_vm_paper,
+    freenerf,
     tensorf_cp,
     tensorf_vm,
     tensorf_vm_published,
@@ -39,6 +40,7 @@ all_methods: dict[str, TrainerConfig] = {
     "tensorf-cp": tensorf_cp,
     "tensorf-vm-published": tensorf_vm_published,
     "zerorf-vm": zerorf_vm,
+    "freenerf": freenerf,
 }
 all_descriptions: dict[str, str] = dict(descriptions)
 

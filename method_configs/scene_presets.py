@@ -50,7 +50,27 @@ PUBLISHED_TENSORF_REAL_SCENE_SETTINGS: dict[str, Any] = {
     "pipeline.model.occupancy_update_fractions": (2500 / TENSORF_LLFF_ITERATIONS,),
     "pipeline.model.field.upsample_fractions": tuple(s / TENSORF_LLFF_ITERATIONS for s in (2000, 3000, 4000, 5500)),
 }
-OWN_REAL_SCENE_SETTINGS: dict[str, dict[str, Any]] = {"tensorf-vm-published": PUBLISHED_TENSORF_REAL_SCENE_SETTINGS}
+FREENERF_LLFF_ITERATIONS = 69_768
+"""The length of FreeNeRF's LLFF run with 3 views (``configs/freenerf/llff3_freenerf.gin``)."""
+FREENERF_REAL_SCENE_SETTINGS: dict[str, Any] = {
+    # FreeNeRF's LLFF config (RegNeRF's optimiser): Adam 2e-3 -> 2e-5 log-linear, a 512-step warm-up from 0.01 of
+    # the lr, gradients clipped to 0.1 by value and by norm, noise of std 1 on the raw density; the pipeline's schedule.
+    "pipeline.model.mlp.density_noise": 1.0,
+    "optimizer.lr_networks": 2e-3,
+    "optimizer.lr_decay_ratio": 0.01,
+    "optimizer.lr_warmup_fraction": 512 / FREENERF_LLFF_ITERATIONS,
+    "optimizer.lr_warmup_start": 0.01,
+    "optimizer.grad_clip_value": 0.1,
+    "optimizer.grad_clip_norm": 0.1,
+    **{
+        path: REAL_SCENE_SETTINGS[path]
+        for path in ("pipeline.model.occupancy_update_fractions", "pipeline.model.field.upsample_fractions")
+    },
+}
+OWN_REAL_SCENE_SETTINGS: dict[str, dict[str, Any]] = {
+    "tensorf-vm-published": PUBLISHED_TENSORF_REAL_SCENE_SETTINGS,
+    "freenerf": FREENERF_REAL_SCENE_SETTINGS,
+}
 """A preset that reproduces a published system takes, on a forward-facing scene, that system's own configuration for
 such scenes in place of the paper's real-scene values (by method name: the values are the system's, not a kind's)."""
 

@@ -18,11 +18,15 @@ import torch
 from fourierf_plugin.data.parsers.blender import BLENDER_DECLARATION
 from fourierf_plugin.data.parsers.llff import LLFF_DECLARATION, NDC_BOX
 from fourierf_plugin.data.scene_effects import SceneEffects
+from fourierf_plugin.engine.checkpoint import list_checkpoints, load_latest_checkpoint
 from fourierf_plugin.engine.trainer import Trainer, TrainerConfig
 from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig
 from fourierf_plugin.model_components.rendering import accumulate
 from fourierf_plugin.models.fourierf import FourieRFModel, FourieRFModelConfig
+from fourierf_plugin.scripts import export as export_script
+from fourierf_plugin.scripts import render as render_script
 from fourierf_plugin.scripts.cli import run_cli
+from fourierf_plugin.scripts.eval import EvalConfig, run_eval
 from fourierf_plugin.scripts.train import build_config, parse_args
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -177,3 +181,53 @@ def load_benchmark(name: str) -> ModuleType:
     sys.modules[spec.name] = module  # its dataclasses look their module up there
     spec.loader.exec_module(module)
     return module
+
+
+def resumed_and_uninterrupted(
+    tmp_path: Path, method: str, iters: int, resume_at: int, flags: list[str]
+) -> tuple[Trainer, Trainer]:
+    """Two identical tiny runs of ``method`` saving every ``resume_at`` steps; the second, its checkpoints after
+    ``resume_at`` deleted, resumed to the end as ``fourierf-train METHOD --load-dir RUN`` does: (the uninterrupted
+    trainer, the resumed one)."""
+    flags = [*flags, "--steps-per-save", str(resume_at), "--keep-checkpoints", str(iters)]
+    uninterrupted, _ = train_tiny(tmp_path / "a", method, iters, flags)
+    _, run_b = train_tiny(tmp_path / "b", method, iters, flags)
+    for ckpt in list_checkpoints(run_b / "checkpoints"):
+        if int(ckpt.stem.split("-")[1]) > resume_at:
+            ckpt.unlink()
+    assert load_latest_checkpoint(run_b / "checkpoints")[1]["step"] == resume_at
+    config, _ = build_config(parse_args([method, "--load-dir", str(run_b)]))
+    resumed = Trainer(config)
+    assert resumed.start_step == resume_at
+    resumed.train()
+    return uninterrupted, resumed
+
+
+def assert_same_model_state(a: Trainer, b: Trainer) -> None:
+    """The two trainers' models hold the same tensors (floats to 1e-5)."""
+    state_a, state_b = a.pipeline.model.state_dict(), b.pipeline.model.state_dict()
+    assert state_a.keys() == state_b.keys()
+    for name, value in state_b.items():
+        if value.is_floating_point():
+            torch.testing.assert_close(value, state_a[name], atol=1e-5, rtol=1e-5, msg=name)
+        else:
+            assert torch.equal(value, state_a[name]), name
+
+
+def evaluate_render_and_export(config_path: Path, out: Path) -> dict:
+    """fourierf-eval (no renders saved), a two-frame orbit and a 16³ mesh of a saved run; returns the evaluation's
+    report (the orbit's frames and the mesh are checked here)."""
+    report = run_eval(
+        EvalConfig(load_config=config_path, output_path=out / "eval.json", render_dir=Path("none"), device="cpu")
+    )
+    render_script.main(
+        ["orbit", "--load-config", str(config_path), "--output-dir", str(out / "orbit"), "--n-frames", "2",
+         "--resolution-scale", "0.25", "--outputs", "rgb", "--no-video"]
+    )  # fmt: skip
+    assert len(list((out / "orbit").rglob("*.png"))) == 2
+    mesh = out / "mesh.ply"
+    export_script.main(
+        ["marching-cubes", "--load-config", str(config_path), "--resolution", "16", "--output-path", str(mesh)]
+    )
+    assert mesh.is_file() and mesh.stat().st_size > 0
+    return report

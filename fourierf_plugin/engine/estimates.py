@@ -9,17 +9,19 @@ from fourierf_plugin.data.datamanager import rays_per_batch_at
 from fourierf_plugin.engine.option_checks import grid_values
 from fourierf_plugin.field_components.generator import parameter_count
 from fourierf_plugin.field_components.schedules import steps_from_fractions, voxel_counts
+from fourierf_plugin.fields.mlp_field import parameter_count as mlp_parameter_count
+from fourierf_plugin.models.freenerf import mlp_config
 from fourierf_plugin.models.zerorf import generator_config
 from fourierf_plugin.utils.console import format_duration
 
 SECONDS_PER_RAY_STEP = 1.05e-6
-"""A CPU iteration's cost per ray and per voxel of the final grid's side, measured on this project's development
-machine with 2 threads (P-CPU: ~110 s for 800 iterations of 1024 rays, final grid 128³): an estimate, not a promise."""
+"""A CPU iteration's cost per ray and per voxel of the final grid's side on 2 threads, fitted to the default CPU run
+(``benchmarks/ab_speed.py`` times it): an estimate, not a promise."""
 
 
 SECONDS_PER_GENERATED_VALUE = 1.0e-6
-"""A zerorf-vm iteration's added cost per value its generators draw (forward and backward, ZeroRF's widths, 2 threads;
-measured on the development machine: three 128² canvases of 16 channels, ~0.77 s)."""
+"""A zerorf-vm iteration's added cost per value its generators draw (forward and backward, ZeroRF's widths, 2 threads),
+fitted to ZeroRF's three canvases at the default CPU grid."""
 
 
 def mean_rays_per_batch(config: Any) -> float:
@@ -33,12 +35,29 @@ def mean_rays_per_batch(config: Any) -> float:
     )
 
 
+SECONDS_PER_MLP_WEIGHT = 2.5e-10
+"""An MLP field's (freenerf's) training cost per sample and per network weight (a forward and backward pass, the trunk
+again for the colour of the samples that show), 2 threads, measured on the bundled scene before the first occupancy
+update: an estimate, not a promise."""
+
+
+def mlp_seconds_per_iteration(config: Any, rays: float) -> float:
+    """An MLP field's iteration: every sample of the box (the sampler's step through the run's mean grid, before the
+    occupancy grid skips empty space: an upper bound) through the whole network."""
+    model = config.pipeline.model
+    side = model.field.n_voxels_init ** (1.0 / 3.0) * grid_growth(config)
+    samples = math.sqrt(3.0) * side / model.step_ratio
+    return rays * samples * mlp_parameter_count(model.mlp) * SECONDS_PER_MLP_WEIGHT
+
+
 def estimate_seconds(config: Any, threads: int) -> float:
     """A CPU run's training time from the measured cost (scaled by the threads it gets)."""
     field = config.pipeline.model.field
     side = field.n_voxels_final ** (1.0 / 3.0)
     rays = mean_rays_per_batch(config) + config.pipeline.model.unseen_rays()
     per_iteration = rays * side * SECONDS_PER_RAY_STEP
+    if mlp_config(config.pipeline.model) is not None:
+        per_iteration = mlp_seconds_per_iteration(config, rays)
     zerorf = generator_config(config.pipeline.model)
     if zerorf is not None:  # a cubic box's canvases: the smallest multiple of 2^levels covering the final grid
         scale = 2**zerorf.upsample_levels
@@ -50,8 +69,8 @@ def estimate_seconds(config: Any, threads: int) -> float:
 
 RUN_TO_GROWTH = 0.9
 """A run's average cost per iteration over its first iterations' cost times the grid's growth (``grid_growth``): what
-the growth leaves out (the field lights up, the occupancy updates shrink the box and filter the rays), measured on the
-bundled scene with FourieRF's CPU sizing; an estimate, which ``time_budget.MARGIN`` covers."""
+the growth leaves out (the field lights up, the occupancy updates shrink the box and filter the rays), fitted on an
+object and a forward-facing scene at the CPU sizing; an estimate, which ``time_budget.MARGIN`` covers."""
 
 SAVE_BYTES_PER_SECOND = 200e6
 """How fast a checkpoint is written (serialised and flushed to disk): an estimate for a local disk."""
@@ -83,7 +102,13 @@ def checkpoint_bytes(config: Any, rays: int) -> float:
     """One checkpoint: the final grid's values with AdamW's two moments, the training rays' state, the rest."""
     field = config.pipeline.model.field
     zerorf = generator_config(config.pipeline.model)
-    values = parameter_count(zerorf) if zerorf is not None else grid_values(field, field.n_voxels_final)
+    mlp = mlp_config(config.pipeline.model)
+    if mlp is not None:
+        values = float(mlp_parameter_count(mlp))
+    elif zerorf is not None:
+        values = parameter_count(zerorf)
+    else:
+        values = grid_values(field, field.n_voxels_final)
     return values * 4 * 3 + rays * 16 + 1e6
 
 

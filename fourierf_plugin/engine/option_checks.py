@@ -16,6 +16,7 @@ from typing import Any
 from fourierf_plugin.field_components.generator import invalid_options
 from fourierf_plugin.field_components.schedules import steps_from_fractions
 from fourierf_plugin.fields.fourier_tensorf_field import ALL_AXES
+from fourierf_plugin.models.freenerf import GRID_ONLY_OPTIONS, mlp_config
 from fourierf_plugin.models.zerorf import generator_config
 from fourierf_plugin.utils.errors import UserError, fail
 from fourierf_plugin.utils.memory import available_memory, check_fits
@@ -141,7 +142,24 @@ RULES: tuple[Rule, ...] = (
     Rule("optimizer.betas_after_reset", optional(each(within(0.0, 1.0 - 1e-12))), "two numbers in [0, 1)", "0.9 0.98"),
     Rule("optimizer.weight_decay", at_least(0.0), "a number >= 0", "0.2"),
     Rule("optimizer.lr_decay_ratio", positive, "a ratio > 0 (1 = no decay)", "0.1"),
+    Rule("optimizer.lr_warmup_fraction", within(0.0, 1.0), "a fraction of the run in [0, 1] (0 = none)", "0.0073"),
+    Rule("optimizer.lr_warmup_start", within(1e-9, 1.0), "a multiplier in (0, 1]", "0.01"),
+    Rule("optimizer.grad_clip_value", at_least(0.0), "a gradient value >= 0 (0 = never clip)", "0.1"),
+    Rule("optimizer.grad_clip_norm", at_least(0.0), "a gradient norm >= 0 (0 = never clip)", "0.1"),
 )
+_MLP = f"{_MODEL}.mlp"
+MLP_RULES: tuple[Rule, ...] = (
+    Rule(f"{_MLP}.depth", int_at_least(1), "an integer >= 1", "8"),
+    Rule(f"{_MLP}.width", int_at_least(1), "an integer >= 1", "256"),
+    Rule(f"{_MLP}.view_width", int_at_least(1), "an integer >= 1", "128"),
+    Rule(f"{_MLP}.position_bands", int_at_least(0), "an integer >= 0 (0 = the raw position only)", "10"),
+    Rule(f"{_MLP}.direction_bands", int_at_least(0), "an integer >= 0 (0 = the raw direction only)", "4"),
+    Rule(f"{_MLP}.ramp_fraction", within(0.0, 1.0), "a fraction of the run in [0, 1] (0 = all bands at once)", "0.9"),
+    Rule(f"{_MLP}.density_bias", lambda v: _number(v), "a finite number", "-1"),
+    Rule(f"{_MLP}.density_noise", at_least(0.0), "a standard deviation >= 0 (0 = none)", "1.0"),
+    Rule(f"{_MLP}.rgb_padding", within(0.0, 0.5), "a padding in [0, 0.5]", "0.001"),
+)
+"""FreeNeRF's MLP options (only where the model has an MLP field)."""
 
 
 def flag_of(path: str) -> str:
@@ -180,6 +198,46 @@ def check_zerorf_options(config: Any) -> None:
         fail(
             f"{flag} {_show(getattr(zerorf, name))} is out of range: it must be {needs}",
             f"pass e.g. {flag} {ZERORF_EXAMPLES[name]} (ZeroRF's value)",
+        )
+
+
+def check_mlp_options(config: Any) -> None:
+    """A UserError for the first option an MLP field (freenerf) cannot be built or trained with: its own out of
+    range, or one that only a factor grid reads (the grids' curriculum, TV, L1, the short-run defaults)."""
+    model = config.pipeline.model
+    mlp = mlp_config(model)
+    if mlp is None:
+        return
+    for rule in MLP_RULES:
+        value = _lookup(config, rule.path)
+        if not rule.ok(value):
+            flag = flag_of(rule.path)
+            fail(f"{flag} {_show(value)} is out of range: it must be {rule.needs}", f"pass e.g. {flag} {rule.example}")
+    if not 0 <= mlp.skip <= max(0, mlp.depth - 2):
+        flag = flag_of(f"{_MLP}.skip")
+        fail(
+            f"{flag} {_show(mlp.skip)} is out of range: the input rejoins after a layer before the last, so it must be "
+            f"0 (never) to {max(0, mlp.depth - 2)} with {flag_of(f'{_MLP}.depth')} {mlp.depth}",
+            f"pass e.g. {flag} 4",
+        )
+    grid_only = [name for name in GRID_ONLY_OPTIONS if getattr(model, name) != 0]
+    if grid_only:
+        flag = flag_of(f"{_MODEL}.{grid_only[0]}")
+        fail(
+            f"{flag} {getattr(model, grid_only[0])} regularises factor grids; freenerf's field is an MLP",
+            f"drop {flag}",
+        )
+    if model.fourier.enabled:
+        flag = flag_of(f"{_MODEL}.fourier.enabled")
+        fail(
+            f"{flag} True low-passes factor grids; freenerf's field is an MLP, whose curriculum is its encoding's mask",
+            f"drop {flag}; {flag_of(f'{_MLP}.ramp_fraction')} sets how fast the mask opens",
+        )
+    if config.budget_rule:
+        fail(
+            "--budget-rule True applies the short-run defaults of factor grids; freenerf's field is an MLP and keeps "
+            "FreeNeRF's values at any budget",
+            "drop --budget-rule",
         )
 
 
@@ -276,6 +334,7 @@ def check_ranges(config: Any) -> None:
             flag = flag_of(rule.path)
             fail(f"{flag} {_show(value)} is out of range: it must be {rule.needs}", f"pass e.g. {flag} {rule.example}")
     check_zerorf_options(config)
+    check_mlp_options(config)
     iters = config.max_num_iterations
     if not (_integer(iters) and iters >= 1):
         fail(f"--max-num-iterations must be at least 1, got {iters}", "pass a positive number")

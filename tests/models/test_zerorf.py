@@ -14,11 +14,10 @@ import torch
 from fourierf_plugin.accel import AccelConfig
 from fourierf_plugin.configs.base import from_dict, load_config, to_dict
 from fourierf_plugin.data.parsers.blender import BLENDER_DECLARATION
-from fourierf_plugin.engine.checkpoint import list_checkpoints, load_latest_checkpoint
 from fourierf_plugin.engine.estimates import checkpoint_bytes, estimate_seconds
 from fourierf_plugin.engine.optimizers import OptimizerConfig, build_optimizer
 from fourierf_plugin.engine.option_checks import check_training_options
-from fourierf_plugin.engine.trainer import Trainer, TrainerConfig
+from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.field_components.generator import ZeroRFConfig, parameter_count
 from fourierf_plugin.fields.fourier_tensorf_field import FieldConfig
 from fourierf_plugin.fields.zerorf_field import ZeroRFField
@@ -28,14 +27,21 @@ from fourierf_plugin.model_components.occupancy import shrink_bounds
 from fourierf_plugin.model_components.rendering import composite_weights
 from fourierf_plugin.models.fourierf import FourieRFModel, FourieRFModelConfig
 from fourierf_plugin.models.zerorf import ZeroRFModelConfig, generator_config
-from fourierf_plugin.scripts import export as export_script
-from fourierf_plugin.scripts import render as render_script
 from fourierf_plugin.scripts import train as train_script
 from fourierf_plugin.scripts.cli import EXIT_USER_ERROR
-from fourierf_plugin.scripts.eval import EvalConfig, run_eval
-from fourierf_plugin.scripts.train import build_config, parse_args
+from fourierf_plugin.scripts.train import parse_args
 from fourierf_plugin.utils.errors import UserError
-from tests.helpers import TINY_FINAL_RESO, cli_exit_code, rays_through_the_slab, slab_model, tiny_args, train_tiny
+from tests.helpers import (
+    TINY_FINAL_RESO,
+    assert_same_model_state,
+    cli_exit_code,
+    evaluate_render_and_export,
+    rays_through_the_slab,
+    resumed_and_uninterrupted,
+    slab_model,
+    tiny_args,
+    train_tiny,
+)
 
 SMALL_FLAGS = [
     "--pipeline.model.zerorf.plane-channels", "64", "32", "32",
@@ -185,26 +191,9 @@ def test_a_short_training_lowers_the_loss(tmp_path: Path) -> None:
 @pytest.mark.slow
 def test_a_resumed_run_ends_where_an_uninterrupted_run_ends(tmp_path: Path) -> None:
     """Upsamples at 9 and 21, occupancy updates at 6 and 12 (ray filtering): resuming at 10 crosses both kinds."""
-    flags = ["--steps-per-save", "10", "--keep-checkpoints", "10", *SMALL_FLAGS]
-    trainer_a, _ = train_tiny(tmp_path / "a", method="zerorf-vm", iters=30, extra=flags)
-    _, run_b = train_tiny(tmp_path / "b", method="zerorf-vm", iters=30, extra=flags)
-    for ckpt in list_checkpoints(run_b / "checkpoints"):
-        if int(ckpt.stem.split("-")[1]) > 10:
-            ckpt.unlink()
-    assert load_latest_checkpoint(run_b / "checkpoints")[1]["step"] == 10
-
-    config, _ = build_config(parse_args(["zerorf-vm", "--load-dir", str(run_b)]))
-    resumed = Trainer(config)
-    assert resumed.start_step == 10
-    resumed.train()
-    state_a, state_b = trainer_a.pipeline.model.state_dict(), resumed.pipeline.model.state_dict()
-    assert state_a.keys() == state_b.keys()
-    for name, value in state_b.items():
-        if value.is_floating_point():
-            torch.testing.assert_close(value, state_a[name], atol=1e-5, rtol=1e-5, msg=name)
-        else:
-            assert torch.equal(value, state_a[name]), name
-    assert trainer_a.pipeline.model.field.resolution == resumed.pipeline.model.field.resolution == TINY_FINAL_RESO
+    uninterrupted, resumed = resumed_and_uninterrupted(tmp_path, "zerorf-vm", 30, 10, SMALL_FLAGS)
+    assert_same_model_state(uninterrupted, resumed)
+    assert uninterrupted.pipeline.model.field.resolution == resumed.pipeline.model.field.resolution == TINY_FINAL_RESO
 
 
 @pytest.mark.slow
@@ -213,23 +202,8 @@ def test_evaluation_render_and_export_read_a_zerorf_run(tmp_path: Path) -> None:
     config_path = run_dir / "config.json"
     saved = json.loads(config_path.read_text())["config"]
     assert saved["method_name"] == "zerorf-vm" and saved["pipeline"]["model"]["_type"] == "ZeroRFModelConfig"
-
-    report = run_eval(
-        EvalConfig(load_config=config_path, output_path=tmp_path / "eval.json", render_dir=Path("none"), device="cpu")
-    )
+    report = evaluate_render_and_export(config_path, tmp_path)
     assert 5.0 < report["results"]["psnr"] < 60.0
-
-    render_script.main(
-        ["orbit", "--load-config", str(config_path), "--output-dir", str(tmp_path / "orbit"), "--n-frames", "2",
-         "--resolution-scale", "0.25", "--outputs", "rgb", "--no-video"]
-    )  # fmt: skip
-    assert len(list((tmp_path / "orbit").rglob("*.png"))) == 2
-
-    mesh = tmp_path / "mesh.ply"
-    export_script.main(
-        ["marching-cubes", "--load-config", str(config_path), "--resolution", "16", "--output-path", str(mesh)]
-    )
-    assert mesh.is_file() and mesh.stat().st_size > 0
 
 
 # -- bad options ---------------------------------------------------------------------------------------------------

@@ -1,0 +1,165 @@
+"""freenerf: FreeNeRF's frequency mask against hand-computed ones, and the preset through training, evaluation,
+resume and its option checks."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+import torch
+
+from fourierf_plugin.engine.optimizers import OptimizerConfig, warmup_scale
+from fourierf_plugin.field_components.frequency_mask import band_mask, encode, encoded_width
+from fourierf_plugin.fields.mlp_field import MLPField, MLPFieldConfig, parameter_count
+from fourierf_plugin.models.freenerf import FreeNeRFModelConfig
+from fourierf_plugin.utils.errors import UserError
+from tests.helpers import (
+    BLENDER,
+    TINY_INIT_RESO,
+    assert_same_model_state,
+    evaluate_render_and_export,
+    resumed_and_uninterrupted,
+    tiny_trainer_config,
+    train_tiny,
+)
+
+SMALL_MLP = [
+    "--pipeline.model.mlp.depth", "3", "--pipeline.model.mlp.width", "32", "--pipeline.model.mlp.skip", "1",
+    "--pipeline.model.mlp.view-width", "16", "--pipeline.datamanager.rays-per-batch", "64",
+]  # fmt: skip
+"""A network a tiny run trains in seconds (the preset's is 8 × 256)."""
+
+
+def _model(max_iters: int = 100) -> torch.nn.Module:
+    config = FreeNeRFModelConfig(mlp=MLPFieldConfig(depth=2, width=8, skip=0, view_width=8))
+    box = torch.tensor([[-1.5] * 3, [1.5] * 3])
+    return config.setup(
+        scene_box=box,
+        near=2.0,
+        far=6.0,
+        effects=BLENDER,
+        max_iters=max_iters,
+        generator=torch.Generator().manual_seed(0),
+    )
+
+
+def _masks(model: torch.nn.Module, step: int) -> tuple[list[float], list[float]]:
+    model.prepare(step)
+    filtered = model.field.filtered
+    return filtered.density.cache["mask"].tolist(), filtered.appearance.cache["mask"].tolist()
+
+
+@pytest.mark.parametrize(
+    ("step", "positions", "directions"),
+    [
+        (0, [0.0] * 10, [0.0] * 4),  # the start: only the raw input is visible
+        # a third of the ramp (30 of 90 steps): 10/3 position bands, 4/3 direction bands visible
+        (30, [1.0, 1.0, 1.0, 1 / 3] + [0.0] * 6, [1.0, 1 / 3, 0.0, 0.0]),
+        (45, [1.0] * 5 + [0.0] * 5, [1.0, 1.0, 0.0, 0.0]),  # the middle
+        (90, [1.0] * 10, [1.0] * 4),  # the end of the ramp (90 % of 100 steps)
+        (100, [1.0] * 10, [1.0] * 4),
+    ],
+)
+def test_the_mask_opens_linearly_over_90_percent_of_the_run(step: int, positions: list, directions: list) -> None:
+    got_positions, got_directions = _masks(_model(100), step)
+    assert got_positions == pytest.approx(positions, abs=1e-6)
+    assert got_directions == pytest.approx(directions, abs=1e-6)
+
+
+def test_the_encoding_keeps_the_raw_input_and_masks_sine_and_cosine_together() -> None:
+    x = torch.tensor([[0.25, -0.5, 0.1]])
+    mask = torch.tensor([1.0, 0.5, 0.0])
+    want = [0.25, -0.5, 0.1]
+    for k, weight in enumerate(mask.tolist()):
+        angles = [math.pi * 2**k * v for v in (0.25, -0.5, 0.1)]
+        want += [weight * math.sin(a) for a in angles] + [weight * math.cos(a) for a in angles]
+    got = encode(x, mask)
+    assert got.shape[-1] == encoded_width(3, 3) == len(want)
+    assert got[0].tolist() == pytest.approx(want, abs=1e-6)
+
+
+def test_a_share_outside_zero_to_one_is_refused() -> None:
+    with pytest.raises(ValueError, match="visible share"):
+        band_mask(1.5, 4)
+
+
+def test_the_hidden_bands_reach_no_output() -> None:
+    """With no band visible, the field is a function of the raw position only: points that differ only in a
+    high-frequency component of the encoding give the same density (no gradient reaches the masked bands' weights)."""
+    model = _model(100)
+    model.prepare(0)
+    xyz = torch.rand(64, 3) * 2 - 1
+    sigma = model.field.density(xyz).sum()
+    sigma.backward()
+    first = model.field.trunk[0].weight.grad
+    assert first[:, :3].abs().sum() > 0, "the raw input is trained"
+    assert first[:, 3:].abs().sum() == 0, "the masked bands are not"
+
+
+def test_parameter_count_matches_the_network() -> None:
+    config = MLPFieldConfig()
+    field = MLPField(config, torch.tensor([[-1.0] * 3, [1.0] * 3]), [4, 4, 4], True, torch.Generator().manual_seed(0))
+    assert sum(p.numel() for p in field.parameters()) == parameter_count(config)
+
+
+def test_warmup_rises_from_its_start_to_one() -> None:
+    config = OptimizerConfig(lr_warmup_fraction=0.1, lr_warmup_start=0.01)
+    assert warmup_scale(config, 0, 100) == pytest.approx(0.01)
+    assert warmup_scale(config, 5, 100) == pytest.approx(0.01 + 0.99 * math.sin(math.pi / 4))
+    assert warmup_scale(config, 10, 100) == warmup_scale(config, 90, 100) == 1.0
+
+
+def test_the_preset_has_no_short_run_rule_and_refuses_one(tmp_path: Path) -> None:
+    config = tiny_trainer_config(tmp_path, "freenerf", iters=20)
+    assert not config.budget_rule
+    assert config.pipeline.model.distance_scale == 1.0
+    assert config.pipeline.effects.occlusion_regularization
+    with pytest.raises(UserError, match="--budget-rule"):
+        tiny_trainer_config(tmp_path, "freenerf", iters=20, extra=["--budget-rule", "True"])
+
+
+@pytest.mark.parametrize(
+    ("flags", "named"),
+    [
+        (["--pipeline.model.mlp.ramp-fraction", "1.5"], "--pipeline.model.mlp.ramp-fraction"),
+        (["--pipeline.model.mlp.position-bands", "-1"], "--pipeline.model.mlp.position-bands"),
+        (["--pipeline.model.mlp.skip", "7"], "--pipeline.model.mlp.skip"),
+        (["--pipeline.model.mlp.density-noise", "-1"], "--pipeline.model.mlp.density-noise"),
+        (["--pipeline.model.tv-weight-density", "1"], "--pipeline.model.tv-weight-density"),
+        (["--pipeline.model.fourier.enabled", "True"], "--pipeline.model.fourier.enabled"),
+        (["--optimizer.grad-clip-norm", "-0.1"], "--optimizer.grad-clip-norm"),
+        (["--optimizer.lr-warmup-fraction", "2"], "--optimizer.lr-warmup-fraction"),
+    ],
+)
+def test_a_bad_option_is_one_clear_error_naming_its_flag(tmp_path: Path, flags: list[str], named: str) -> None:
+    with pytest.raises(UserError) as info:
+        tiny_trainer_config(tmp_path, "freenerf", iters=20, extra=flags)
+    assert named in info.value.problem and info.value.fix
+
+
+def _losses(run_dir: Path) -> list[float]:
+    records = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
+    return [r["loss"] for r in records if "loss" in r]
+
+
+@pytest.mark.slow
+def test_a_short_run_lowers_the_loss_and_evaluates_renders_and_exports(tmp_path: Path) -> None:
+    _, run_dir = train_tiny(tmp_path, "freenerf", iters=40, extra=[*SMALL_MLP, "--log-every", "1"])
+    losses = _losses(run_dir)
+    assert len(losses) == 40
+    assert sum(losses[-5:]) / 5 < sum(losses[:5]) / 5, f"loss went from {losses[:5]} to {losses[-5:]}"
+    config_path = run_dir / "config.json"
+    saved = json.loads(config_path.read_text())["config"]
+    assert saved["method_name"] == "freenerf" and saved["pipeline"]["model"]["_type"] == "FreeNeRFModelConfig"
+    report = evaluate_render_and_export(config_path, tmp_path)
+    assert report["step"] == 40 and 5.0 < report["results"]["psnr"] < 60.0
+
+
+@pytest.mark.slow
+def test_a_resumed_run_ends_where_an_uninterrupted_run_ends(tmp_path: Path) -> None:
+    """Occupancy updates at 8 and 16, upsamples at 12 and 28 of 40, the mask ramp over 36: resuming at 20."""
+    uninterrupted, resumed = resumed_and_uninterrupted(tmp_path, "freenerf", 40, 20, SMALL_MLP)
+    assert resumed.pipeline.model.field.resolution != TINY_INIT_RESO, "the resumed run crossed an upsample"
+    assert_same_model_state(uninterrupted, resumed)

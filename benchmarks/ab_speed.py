@@ -35,9 +35,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from harness import GRID_FLAGS, run_timed, section_head, update_benchmarks_md
-
-from fourierf_plugin.bench.phases import elapsed_by_step, read_metrics
+from harness import GRID_FLAGS, elapsed_by_step, read_metrics, run_timed, section_head, update_benchmarks_md
 
 REPO = Path(__file__).resolve().parents[1]
 SOURCES = ("fourierf_plugin", "method_configs", "data/parsers")

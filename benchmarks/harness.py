@@ -13,7 +13,9 @@ import os
 import platform
 import re
 import shutil
+import subprocess
 import sys
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,8 +23,6 @@ from pathlib import Path
 import numpy as np
 import tomllib
 
-from fourierf_plugin.bench.phases import log_records, read_metrics
-from fourierf_plugin.bench.runner import run_timed
 from fourierf_plugin.utils.console import CPU_THREADS_NOTE
 
 BIN = Path(sys.executable).parent
@@ -35,16 +35,58 @@ GRID_FLAGS = [
 ]  # fmt: skip
 
 
+def run_timed(cmd: Sequence[str], log: Path, env: dict[str, str] | None = None) -> tuple[float, float, int]:
+    """Wall seconds, peak RSS (GB, the child's rusage) and exit code of one child process, its output to ``log``."""
+    log.parent.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    with log.open("w") as fh:
+        fh.write(" ".join(map(str, cmd)) + "\n\n")
+        fh.flush()
+        proc = subprocess.Popen(list(map(str, cmd)), stdout=fh, stderr=subprocess.STDOUT, env=env)
+        _, status, usage = os.wait4(proc.pid, 0)
+    return time.perf_counter() - start, usage.ru_maxrss / 1024**2, os.waitstatus_to_exitcode(status)
+
+
+def read_metrics(path: Path) -> list[dict]:
+    """The records of a run's metrics.jsonl (a missing file or a torn last line gives what could be read)."""
+    records = []
+    for line in path.read_text().splitlines() if path.is_file() else []:
+        try:
+            records.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return records
+
+
+def log_records(records: list[dict]) -> list[dict]:
+    return [r for r in records if "event" not in r and "step" in r]
+
+
+def done_record(records: list[dict]) -> dict | None:
+    """The trainer's closing record: ``step``, ``train_seconds`` and, for a --time-budget run, the planned seconds."""
+    return next((r for r in reversed(records) if r.get("event") == "done"), None)
+
+
+def elapsed_by_step(records: list[dict]) -> dict[int, float]:
+    """Training seconds since the start of the run at every logged step."""
+    return {int(r["step"]): float(r["elapsed_s"]) for r in log_records(records) if "elapsed_s" in r}
+
+
 @dataclass(frozen=True)
 class Run:
     method: str
     iters: int
     seed: int
     views: str  # a label for the training-view set
+    budget: str | None = None
+    """A ``--time-budget`` that sizes the run in place of ``iters`` and the grid flags (the trainer picks both)."""
 
     @property
     def key(self) -> str:
-        return f"{self.method}_{self.views}_{self.iters}_s{self.seed}"
+        return f"{self.method}_{self.views}_{self.budget or self.iters}_s{self.seed}"
+
+    def sizes(self) -> list[str]:
+        return ["--time-budget", self.budget] if self.budget else ["--max-num-iterations", str(self.iters), *GRID_FLAGS]
 
 
 def train_and_eval(
@@ -60,20 +102,15 @@ def train_and_eval(
     """Train one run, evaluate it on the test split, and return its result row. ``threads`` caps torch's CPU threads
     in both steps, so that jobs run side by side do not oversubscribe the cores during evaluation either."""
     out_dir = work / "runs"
-    run_dir = out_dir / scene / run.method / run.key
-    # The harness owns its work folder: a run interrupted earlier left this directory without a result, and a new
-    # run would otherwise go to "<key>-1" (runs never overwrite each other).
-    shutil.rmtree(run_dir, ignore_errors=True)
-    shutil.rmtree(run_dir.with_name(run.key + "-1"), ignore_errors=True)
-    train_cmd = [
-        str(BIN / "fourierf-train"), run.method, "--data", str(data), "--output-dir", str(out_dir),
-        "--timestamp", run.key, "--seed", str(run.seed), "--max-num-iterations", str(run.iters),
-        *GRID_FLAGS, *extra, *thread_flags(threads), *parser_args,
-    ]  # fmt: skip
+    # The harness owns its work folder: a run interrupted earlier left its directory (under the scene folder the
+    # trainer names after the data) without a result, and a new run would otherwise go to "<key>-1".
+    for earlier in [*out_dir.glob(f"*/{run.method}/{run.key}"), *out_dir.glob(f"*/{run.method}/{run.key}-1")]:
+        shutil.rmtree(earlier, ignore_errors=True)
     train_log = work / f"{run.key}.train.log"
-    train_s, train_rss, code = run_timed(train_cmd, train_log)
+    train_s, train_rss, code = run_timed(train_command(run, data, out_dir, parser_args, extra, threads), train_log)
     if code != 0:
         raise RuntimeError(f"training failed ({code}); see {train_log}")
+    run_dir = next(out_dir.glob(f"*/{run.method}/{run.key}"), out_dir / scene / run.method / run.key)
     views = json.loads((run_dir / "views.json").read_text())
     row = {
         "key": run.key, "method": run.method, "iters": run.iters, "seed": run.seed, "views": run.views,
@@ -82,6 +119,16 @@ def train_and_eval(
         "revived_batches": revived_batches(run_dir / "metrics.jsonl"),
     }  # fmt: skip
     return row | evaluate(run_dir, run.key, work, lpips, threads=threads)
+
+
+def train_command(
+    run: Run, data: Path, out: Path, parser_args: Sequence[str], extra: Sequence[str] = (), threads: int | None = None
+) -> list[str]:
+    """The ``fourierf-train`` command of one run: its sizes, then ``extra`` (later flags win), the parser last."""
+    return [
+        str(BIN / "fourierf-train"), run.method, "--data", str(data), "--output-dir", str(out),
+        "--timestamp", run.key, "--seed", str(run.seed), *run.sizes(), *extra, *thread_flags(threads), *parser_args,
+    ]  # fmt: skip
 
 
 def threads_used(train_log: Path) -> int | None:
@@ -176,32 +223,6 @@ def fmt(values: list[float], digits: int) -> str:
     return f"{np.mean(values):.{digits}f} ± {np.std(values):.{digits}f}"
 
 
-def results_table(results: dict[str, dict], first_views: str) -> list[str]:
-    """Markdown rows grouped by (views, iterations, method), then the FourieRF − TensoRF gaps."""
-    groups: dict[tuple, list[dict]] = {}
-    for r in results.values():
-        groups.setdefault((r["views"], r["iters"], r["method"]), []).append(r)
-    lines = [
-        "| views | iterations | method | seeds | PSNR ↑ | SSIM ↑ | LPIPS ↓ | train s | peak RSS GB |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for (views, iters, method), rows in sorted(groups.items(), key=lambda kv: (kv[0][0] != first_views, kv[0][1:])):
-        lines.append(
-            f"| {views} {rows[0]['train_view_ids']} | {iters} | {method} | {len(rows)} | "
-            f"{fmt([r['psnr'] for r in rows], 2)} | {fmt([r['ssim'] for r in rows], 3)} | "
-            f"{fmt([r['lpips'] for r in rows], 3)} | {fmt([r['train_seconds'] for r in rows], 0)} | "
-            f"{max(r['train_peak_rss_gb'] for r in rows):.2f} |"
-        )
-    lines += ["", "Gaps (mean PSNR) and training-time ratios:"]
-    for views, iters in sorted({(v, i) for v, i, _ in groups}):
-        f, t = groups.get((views, iters, "fourierf-vm")), groups.get((views, iters, "tensorf-vm"))
-        if f and t:
-            gap = np.mean([r["psnr"] for r in f]) - np.mean([r["psnr"] for r in t])
-            ratio = np.mean([r["train_seconds"] for r in f]) / np.mean([r["train_seconds"] for r in t])
-            lines.append(f"- {views} views, {iters} iterations: fourierf-vm − tensorf-vm = {gap:+.2f} dB; {ratio:.2f}×")
-    return lines
-
-
 def update_benchmarks_md(path: Path, begin: str, end: str, body: list[str]) -> str:
     """Replace (or append) the section between the markers; returns the section."""
     section = "\n".join([begin, *body, end])
@@ -251,6 +272,7 @@ def cpu_and_cores() -> str:
 
 SUITE_FILE = Path(__file__).with_name("suite.toml")
 QUALITY_RESULTS = REPO / "benchmarks" / "results" / "quality" / "results.jsonl"
+EQUAL_TIME_RESULTS = REPO / "benchmarks" / "results" / "equal_time" / "results.jsonl"
 REPEATS = "repeats.jsonl"
 """Beside the results: other runs of a key that was run again (the results keep one row a key), each with a
 ``repeat`` note that says what that run was (on a GPU or on more than one CPU thread a run is not bit-reproducible)."""
@@ -288,6 +310,8 @@ class Suite:
     rule_along_the_budget: dict[str, dict[str, str]]
     grids: tuple[dict, ...]
     curve_every: int
+    equal_time: dict
+    """Methods, scenes and budgets of the equal-time stage, and what its report compares them with."""
 
     def parser_args(self, scene: str, protocol: str) -> list[str]:
         args = list(self.scenes[scene]["parser"])
@@ -306,7 +330,7 @@ def load_suite(path: Path = SUITE_FILE) -> Suite:
     return Suite(
         tuple(data["methods"]), tuple(data["seeds"]), protocols, data["scenes"],
         {scene: tuple(names) for scene, names in data["settings"].items()}, tuple(data["targets"]),
-        data["rule_along_the_budget"], tuple(data["grids"]), data["curve_every"],
+        data["rule_along_the_budget"], tuple(data["grids"]), data["curve_every"], data["equal_time"],
     )  # fmt: skip
 
 

@@ -1,6 +1,7 @@
-"""The suite's report: regenerates the few-shot quality section of BENCHMARKS.md from the committed rows.
+"""The suite's report: regenerates the few-shot quality and the equal-time sections of BENCHMARKS.md (and the
+equal-time figure) from the committed rows.
 
-    python benchmarks/report.py        # reads benchmarks/results/quality/{results,repeats}.jsonl and suite.toml
+    python benchmarks/report.py        # reads benchmarks/results/{quality,equal_time}/*.jsonl and suite.toml
 
 Each method at its own val-chosen setting per scene and protocol; the test PSNR of that setting only. Nothing is
 trained here: a section is a pure function of the rows, so it is regenerated at any time.
@@ -12,8 +13,10 @@ import argparse
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
+import equal_time_report as et
 import numpy as np
 from harness import (
+    EQUAL_TIME_RESULTS,
     QUALITY_RESULTS,
     REPEATS,
     REPO,
@@ -354,10 +357,15 @@ def report(results: dict[str, dict], repeats: Sequence[dict], suite: Suite = SUI
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--results", type=Path, default=QUALITY_RESULTS, help="the rows run.py recorded")
+    ap.add_argument("--equal-time", type=Path, default=EQUAL_TIME_RESULTS, help="the equal-time stage's rows")
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")
+    ap.add_argument("--figure", type=Path, default=REPO / et.FIGURE, help="the equal-time figure (SVG)")
     args = ap.parse_args()
     body = report(load_results(args.results), read_repeats(args.results.with_name(REPEATS)))
     print(update_benchmarks_md(args.markdown, BEGIN, END, body))
+    timed = list(load_results(args.equal_time).values())
+    print(update_benchmarks_md(args.markdown, et.BEGIN, et.END, et.section(timed, SUITE)))
+    args.figure.write_text(et.figure(timed, SUITE))
 
 
 if __name__ == "__main__":

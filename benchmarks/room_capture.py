@@ -21,7 +21,9 @@ import trimesh
 from harness import (
     BIN,
     Run,
+    done_record,
     evaluate,
+    read_metrics,
     run_plan,
     run_timed,
     section_head,
@@ -29,7 +31,6 @@ from harness import (
     update_benchmarks_md,
 )
 
-from fourierf_plugin.bench.phases import done_record, read_metrics
 from fourierf_plugin.utils.geometry import chamfer_distance, mesh_surface_points
 
 REPO = Path(__file__).resolve().parents[1]

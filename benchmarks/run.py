@@ -9,7 +9,8 @@ it has exactly its setting's values), then ``fourierf-eval`` scores it on the te
     python benchmarks/run.py curve  --scene fern     # cpu-3000, a checkpoint every 500 iterations evaluated
     python benchmarks/run.py sweep  --only S --again "threads not recorded"  # run recorded points again
     python benchmarks/run.py merge  --rows lane2/results.jsonl               # rows run elsewhere
-    python benchmarks/report.py                                              # the BENCHMARKS.md section
+    python benchmarks/run.py equal-time --scene lego fern --budget 1m 3m --jobs 2  # equal_time.py: wall-time budgets
+    python benchmarks/report.py                                              # the BENCHMARKS.md sections
 
 ``--device cuda --jobs 4`` runs four trainings at once on one GPU. GPU runs are not bit-reproducible (grid_sample's
 CUDA backward accumulates with atomics), nor is a CPU run on more than one thread (parallel kernels sum in a varying
@@ -23,11 +24,14 @@ import argparse
 import json
 import sys
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
+import equal_time
 from harness import (
+    EQUAL_TIME_RESULTS,
     QUALITY_RESULTS,
     REPEATS,
     REPO,
@@ -82,29 +86,54 @@ def curve_points(run_dir: Path, run: Run, work: Path, lpips: Path, threads: int 
     return points
 
 
-def run_all(plan: Sequence[Point], args: argparse.Namespace) -> None:
-    """Run what is not yet recorded, ``--jobs`` at a time; each finished row is appended at once."""
+@dataclass(frozen=True)
+class Job:
+    key: str
+    """The row's key in the results."""
+    logs: Path
+    """Its logs' path less the ``.train.log`` / ``.eval.log`` ending: a failure prints the last one's end."""
+    execute: Callable[[], dict]
+    summary: Callable[[dict], str]
+
+
+def quality_job(point: Point, args: argparse.Namespace) -> Job:
+    scene, run = point[0], point[3]
+    summary = lambda row: f"val {row['val_psnr']:.2f}  train {row['train_seconds']:.0f}s"  # noqa: E731
+    return Job(f"{scene}/{run.key}", args.work / scene / run.key, lambda: execute(point, args), summary)
+
+
+def equal_time_job(point: equal_time.Point, args: argparse.Namespace) -> Job:
+    def summary(row: dict) -> str:
+        if "too_short" in row:
+            return f"budget too short: {row['too_short']}"
+        return f"test {row['psnr']:.2f}  {row['iterations']} iterations in {row['trained_seconds']:.0f}s"
+
+    logs = args.work / point.scene / point.run(SUITE).key
+    return Job(point.key, logs, lambda: equal_time.execute(point, SUITE, args.data, args.work, args.lpips, args.jobs),
+               summary)  # fmt: skip
+
+
+def run_all(jobs: Sequence[Job], args: argparse.Namespace) -> None:
+    """Run the jobs not yet recorded, ``--jobs`` at a time, in their order; each finished row is appended at once."""
     path = args.results
     done = {} if args.again else load_results(path)
-    todo = [p for p in plan if f"{p[0]}/{p[3].key}" not in done]
-    todo.sort(key=lambda p: (-p[3].iters, p[0] != "fern"))  # longest first: the pool ends on short runs
+    todo = [job for job in jobs if job.key not in done]
     lock = threading.Lock()
 
-    def one(point: Point) -> None:
-        scene, run = point[0], point[3]
+    def one(job: Job) -> None:
         try:
-            row = execute(point, args)
+            row = job.execute()
         except RuntimeError as err:  # the log's end says why; the other runs go on
-            logs = sorted((args.work / scene).glob(f"{run.key}*.log"))
+            logs = sorted(job.logs.parent.glob(f"{job.logs.name}*.log"))
             tail = "\n".join(logs[-1].read_text().splitlines()[-15:]) if logs else ""
-            print(f"FAILED {scene}/{run.key}: {err}\n{tail}", flush=True)
+            print(f"FAILED {job.key}: {err}\n{tail}", flush=True)
             return
-        row["key"] = f"{scene}/{run.key}"
+        row["key"] = job.key
         with lock:
             record(path, row, args.again)
-        print(f"{row['key']}: val {row['val_psnr']:.2f}  train {row['train_seconds']:.0f}s", flush=True)
+        print(f"{job.key}: {job.summary(row)}", flush=True)
 
-    print(f"{len(todo)} runs to do ({len(plan) - len(todo)} recorded)", flush=True)
+    print(f"{len(todo)} runs to do ({len(jobs) - len(todo)} recorded)", flush=True)
     with ThreadPoolExecutor(max(1, args.jobs)) as pool:
         list(pool.map(one, todo))
 
@@ -226,16 +255,19 @@ def curve_plan(args: argparse.Namespace, suite: Suite = SUITE) -> list[Point]:
 
 def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("stage", choices=("sweep", "seeds", "curve", "merge"))
+    ap.add_argument("stage", choices=("sweep", "seeds", "curve", "merge", "equal-time"))
     ap.add_argument("--protocol", nargs="+", choices=tuple(suite.protocols), default=None,
                     help="default: cpu-800 mid-3000 mid-800 (the curve stage: cpu-3000)")  # fmt: skip
     ap.add_argument("--scene", nargs="+", choices=tuple(suite.settings), default=list(suite.settings))
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data",
                     help="folder holding blender/lego and llff/fern")  # fmt: skip
     ap.add_argument("--lpips", type=Path, default=REPO.parent / "shared" / "lpips" / "lpips_alex_v0.1.pth")
-    ap.add_argument("--work", type=Path, default=REPO / "outputs" / "bench_quality", help="run folders and logs")
-    ap.add_argument("--results", type=Path, default=QUALITY_RESULTS,
-                    help="one row per finished run (the report reads it; finished runs are skipped)")  # fmt: skip
+    ap.add_argument("--work", type=Path, default=None, help="run folders and logs (default: outputs/bench_STAGE)")
+    ap.add_argument("--results", type=Path, default=None,
+                    help="one row per finished run (the report reads it; finished runs are skipped); default: "
+                         "results/quality/results.jsonl, for equal-time results/equal_time/results.jsonl")  # fmt: skip
+    ap.add_argument("--budget", nargs="+", default=None,
+                    help="equal-time: the --time-budget of each point (default: the suite's budgets)")  # fmt: skip
     ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
     ap.add_argument("--only", nargs="+", default=None, help="sweep only these settings (names from suite.toml)")
     ap.add_argument("--methods", nargs="+", choices=suite.methods, default=None, help="run only these methods")
@@ -251,6 +283,12 @@ def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argpa
     ap.add_argument("--rows", nargs="+", type=Path, default=None, metavar="FILE",
                     help="merge: results files written elsewhere (another --results, the device)")  # fmt: skip
     args = ap.parse_args(argv)
+    timed = args.stage == "equal-time"
+    args.work = args.work or REPO / "outputs" / ("bench_equal_time" if timed else "bench_quality")
+    args.results = args.results or (EQUAL_TIME_RESULTS if timed else QUALITY_RESULTS)
+    if args.budget is not None and not timed:
+        sys.exit(f"error: --budget sets the equal-time stage's budgets; drop it for the {args.stage} stage")
+    args.budget = args.budget or list(suite.equal_time["budgets"])
     if args.protocol is None:
         args.protocol = ["cpu-3000"] if args.stage == "curve" else ["cpu-800", "mid-3000", "mid-800"]
     if args.threads < 1:
@@ -284,8 +322,14 @@ def main() -> None:
     for scene in args.scene:
         if not (args.data / SUITE.scenes[scene]["path"]).exists():
             sys.exit(f"error: {scene} not found under {args.data}; pass --data FOLDER")
-    plans = {"sweep": sweep_plan, "seeds": seeds_plan, "curve": curve_plan}
-    run_all(plans[args.stage](args), args)
+    if args.stage == "equal-time":
+        points, skipped = equal_time.plan(SUITE, args.scene, args.budget, equal_time.known_methods())
+        print("\n".join(skipped), flush=True)
+        run_all([equal_time_job(p, args) for p in points], args)
+        return
+    plan = {"sweep": sweep_plan, "seeds": seeds_plan, "curve": curve_plan}[args.stage](args)
+    plan.sort(key=lambda p: (-p[3].iters, p[0] != "fern"))  # longest first: the pool ends on short runs
+    run_all([quality_job(p, args) for p in plan], args)
 
 
 if __name__ == "__main__":

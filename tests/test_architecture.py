@@ -53,7 +53,6 @@ LAYERS: dict[str, int] = {
     f"{PACKAGE}.method_configs": 7,
     f"{PACKAGE}.vis": 7,  # training observers: TensorBoard
     f"{PACKAGE}.viewer": 8,  # the web viewer (loads runs, exports meshes)
-    f"{PACKAGE}.bench": 8,
     f"{PACKAGE}.scripts": 9,
 }
 
@@ -156,7 +155,6 @@ def test_no_import_cycles() -> None:
     [
         (f"{PACKAGE}.engine.trainer", f"{PACKAGE}.method_configs"),
         (f"{PACKAGE}.configs.base", f"{PACKAGE}.method_configs"),
-        (f"{PACKAGE}.bench.runner", f"{PACKAGE}.scripts"),
         (f"{PACKAGE}.fields.fourier_tensorf_field", f"{PACKAGE}.accel"),
     ],
 )

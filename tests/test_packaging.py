@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import pkgutil
+import re
 import shutil
 import subprocess
 import sys
@@ -26,7 +27,6 @@ REQUIRED = [
     "fourierf_plugin/field_components/fourier.py",
     "fourierf_plugin/accel/__init__.py",
     "fourierf_plugin/accel/ops.py",
-    "fourierf_plugin/bench/runner.py",
     "fourierf_plugin/synthetic/__init__.py",
     "fourierf_plugin/scripts/train.py",
     "fourierf_plugin/scripts/eval.py",
@@ -38,7 +38,7 @@ SOURCE_FOLDERS = {
     REPO_ROOT / "method_configs": "fourierf_plugin/method_configs",
 }
 FORBIDDEN_PREFIXES = ("data/", "method_configs/", "tests/", "demo/", "benchmarks/", "tools/")
-SCRIPTS = ("train", "eval", "export", "render", "synth", "bench", "process-data")  # fourierf-NAME
+SCRIPTS = ("train", "eval", "export", "render", "synth", "process-data")  # fourierf-NAME
 
 
 def _ignore_build_leftovers(directory: str, names: list[str]) -> set[str]:
@@ -136,3 +136,15 @@ def test_mapped_packages_come_from_the_top_level_folders() -> None:
 
 def _raise(name: str) -> None:
     raise ImportError(f"cannot import {name} while walking fourierf_plugin")
+
+
+def test_the_package_writes_no_benchmark_report() -> None:
+    """BENCHMARKS.md and its sections are written by the scripts in benchmarks/ alone: no installed module names a
+    markdown file to write."""
+    named = [
+        str(path.relative_to(REPO_ROOT))
+        for folder in SOURCE_FOLDERS
+        for path in folder.rglob("*.py")
+        if re.search(r"[\w-]\.md[\"']", path.read_text())
+    ]
+    assert SOURCE_FOLDERS and not named, named

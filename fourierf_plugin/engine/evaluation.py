@@ -1,7 +1,6 @@
 """Scoring a trained run on held-out views: PSNR, SSIM and LPIPS per view and their means, and the renders.
 
-``fourierf-eval`` and ``fourierf-bench`` both call ``evaluate``; it prints nothing itself (``on_view`` hears of
-each view as it is scored).
+``fourierf-eval`` calls ``evaluate``; it prints nothing itself (``on_view`` hears of each view as it is scored).
 """
 
 from __future__ import annotations
@@ -22,6 +21,7 @@ from fourierf_plugin.utils.colormaps import to_uint8
 from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.utils.lpips import LPIPS
 from fourierf_plugin.utils.metrics import mean_and_std, psnr, ssim
+from fourierf_plugin.utils.os_errors import user_error_for
 
 METRICS = ("psnr", "ssim", "lpips")
 
@@ -78,9 +78,12 @@ def evaluate(
         per_image = _score_views(run, split, lpips, partial, on_view)
         if render_dir is not None and partial is not None:
             _put_in_place(partial, render_dir, overwrite)
-    except BaseException:
+    except BaseException as err:
         if partial is not None:
             shutil.rmtree(partial, ignore_errors=True)  # made by this call: a half-filled folder helps no one
+        problem = user_error_for(err, path=render_dir) if isinstance(err, Exception) else None
+        if problem is not None:
+            raise problem from err
         raise
     results: dict[str, float | None] = {}
     for key in METRICS:

@@ -11,12 +11,23 @@ import pytest
 import torch
 
 from fourierf_plugin.engine.optimizers import OptimizerConfig, warmup_scale
+from fourierf_plugin.engine.trainer import Trainer
 from fourierf_plugin.field_components.frequency_mask import band_mask, encode, encoded_width
 from fourierf_plugin.fields.mlp_field import MLPField, MLPFieldConfig, parameter_count
 from fourierf_plugin.models.freenerf import FreeNeRFModelConfig
+from fourierf_plugin.scripts.eval import EvalConfig, run_eval
+from fourierf_plugin.scripts.train import build_config, parse_args
 from fourierf_plugin.utils.errors import UserError
+from fourierf_plugin.viewer.render_service import (
+    PreviewQuality,
+    camera_from_dataset,
+    high_frequency_energy,
+    render_view,
+)
+from tests.conftest import require_shared
 from tests.helpers import (
     BLENDER,
+    TINY_FLAGS,
     TINY_INIT_RESO,
     assert_same_model_state,
     evaluate_render_and_export,
@@ -144,17 +155,40 @@ def _losses(run_dir: Path) -> list[float]:
     return [r["loss"] for r in records if "loss" in r]
 
 
+@pytest.fixture(scope="module")
+def short_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Trainer, Path]:
+    """A 40-iteration freenerf run of a small network on the bundled scene."""
+    return train_tiny(tmp_path_factory.mktemp("out"), "freenerf", iters=40, extra=[*SMALL_MLP, "--log-every", "1"])
+
+
 @pytest.mark.slow
-def test_a_short_run_lowers_the_loss_and_evaluates_renders_and_exports(tmp_path: Path) -> None:
-    _, run_dir = train_tiny(tmp_path, "freenerf", iters=40, extra=[*SMALL_MLP, "--log-every", "1"])
-    losses = _losses(run_dir)
+def test_a_short_run_lowers_the_loss(short_run: tuple[Trainer, Path]) -> None:
+    losses = _losses(short_run[1])
     assert len(losses) == 40
     assert sum(losses[-5:]) / 5 < sum(losses[:5]) / 5, f"loss went from {losses[:5]} to {losses[-5:]}"
-    config_path = run_dir / "config.json"
+
+
+@pytest.mark.slow
+def test_a_run_evaluates_renders_and_exports(short_run: tuple[Trainer, Path], tmp_path: Path) -> None:
+    config_path = short_run[1] / "config.json"
     saved = json.loads(config_path.read_text())["config"]
     assert saved["method_name"] == "freenerf" and saved["pipeline"]["model"]["_type"] == "FreeNeRFModelConfig"
     report = evaluate_render_and_export(config_path, tmp_path)
     assert report["step"] == 40 and 5.0 < report["results"]["psnr"] < 60.0
+
+
+@pytest.mark.slow
+def test_the_viewer_renders_a_run_at_any_share_of_the_bands(short_run: tuple[Trainer, Path]) -> None:
+    """The viewer's sliders set the visible share of the bands; no band at all is a smoother picture."""
+    trainer = short_run[0]
+    model = trainer.pipeline.model
+    camera = camera_from_dataset(trainer.pipeline.datamanager.parser.get_outputs("test").cameras, 0)
+    full = render_view(model, camera, (1.0, 1.0))
+    coarse = render_view(model, camera, (0.0, 0.0))
+    preview = render_view(model, camera, (0.5, 0.5), quality=PreviewQuality(), render_size=(25, 25))
+    assert full is not None and coarse is not None and preview is not None
+    assert full.rgb.shape == preview.rgb.shape == (camera.height, camera.width, 3)
+    assert high_frequency_energy(coarse.rgb) < high_frequency_energy(full.rgb)
 
 
 @pytest.mark.slow
@@ -163,3 +197,23 @@ def test_a_resumed_run_ends_where_an_uninterrupted_run_ends(tmp_path: Path) -> N
     uninterrupted, resumed = resumed_and_uninterrupted(tmp_path, "freenerf", 40, 20, SMALL_MLP)
     assert resumed.pipeline.model.field.resolution != TINY_INIT_RESO, "the resumed run crossed an upsample"
     assert_same_model_state(uninterrupted, resumed)
+
+
+@pytest.mark.slow
+def test_a_forward_facing_scene_takes_freenerfs_llff_values_and_trains_in_ndc(tmp_path: Path) -> None:
+    fern = require_shared("data", "llff", "fern")
+    args = [
+        "freenerf", "--data", str(fern), "--output-dir", str(tmp_path), "--max-num-iterations", "12", *TINY_FLAGS,
+        *SMALL_MLP, "llff-data", "--num-views", "3", "--downscale", "16",
+    ]  # fmt: skip
+    config, _ = build_config(parse_args(args))
+    assert config.pipeline.effects.ray_space == "ndc" and config.pipeline.effects.occlusion_regularization
+    assert config.pipeline.model.mlp.density_noise == 1.0
+    optimizer = config.optimizer
+    assert (optimizer.lr_networks, optimizer.lr_decay_ratio, optimizer.lr_warmup_start) == (2e-3, 0.01, 0.01)
+    assert optimizer.grad_clip_value == optimizer.grad_clip_norm == 0.1
+    run_dir = Trainer(config).train()
+    report = run_eval(
+        EvalConfig(load_config=run_dir / "config.json", output_path=tmp_path / "eval.json", render_dir=Path("none"))
+    )
+    assert 3.0 < report["results"]["psnr"] < 60.0

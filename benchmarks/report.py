@@ -87,20 +87,6 @@ def curve_table(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
     ]
 
 
-def equal_time_lines(results: dict[str, dict]) -> list[str]:
-    """A final cutoff 0.7 costs wall time: is it better than as many more iterations without it (``cpu-1040``)?"""
-    longer = rows_by(results, "lego", "cpu-1040", F).get("wd0-nodecay", [])
-    capped = rows_by(results, "lego", "cpu-800", F).get("wd0-nodecay-ffinal0.7", [])
-    if not (longer and capped):
-        return []
-    val, test = ([fmt([r[k] for r in rows], 2) for rows in (longer, capped)] for k in ("val_psnr", "psnr"))
-    return [
-        f"- lego, fourierf-vm, equal wall time: `wd0-nodecay` at 1040 iterations val {val[0]}, test {test[0]} "
-        f"({len(longer)} seeds) against `wd0-nodecay-ffinal0.7` at 800 val {val[1]}, test {test[1]} "
-        f"({len(capped)} seeds)"
-    ]
-
-
 def first_seed_row(results: dict[str, dict], protocol: str, method: str, setting: str, suite: Suite) -> dict | None:
     rows = [r for r in rows_by(results, "fern", protocol, method).get(setting, []) if r["seed"] == suite.seeds[0]]
     return rows[0] if rows else None
@@ -323,7 +309,6 @@ def report(results: dict[str, dict], repeats: Sequence[dict], suite: Suite = SUI
     body += [*summary, ""]
     body += targets_table(results, suite)
     body += mid_along_the_budget(results, suite)
-    body += equal_time_lines(results)
     body += rule_along_the_budget(results, suite)
     body += ["", *curve_table(results, suite)]
     body += later_seeds_table(results, repeats, suite)

@@ -183,17 +183,6 @@ def test_the_curve_table_sets_the_rules_3000_iteration_setting_beside_its_800() 
     assert f"| 19.50 / 19.00 (`{short}`) |" in row, "the rule's 800-iteration run stands beside its 3000"
 
 
-def test_the_equal_time_line_compares_more_iterations_with_the_final_cutoff() -> None:
-    longer = _row("wd0-nodecay", SEEDS[0], val=22.0, test=21.5) | {"protocol": "cpu-1040", "key": "a"}
-    capped = [_row("wd0-nodecay-ffinal0.7", seed, val=22.25, test=22.0) | {"key": f"b{seed}"} for seed in (1, 2)]
-    lines = rep.equal_time_lines({r["key"]: r for r in (longer, *capped)})
-    assert lines == [
-        "- lego, fourierf-vm, equal wall time: `wd0-nodecay` at 1040 iterations val 22.00, test 21.50 (1 seeds) "
-        "against `wd0-nodecay-ffinal0.7` at 800 val 22.25 ± 0.00, test 22.00 ± 0.00 (2 seeds)"
-    ]
-    assert rep.equal_time_lines({"a": longer}) == []
-
-
 def test_the_rule_line_sets_each_methods_800_iteration_run_beside_its_3000() -> None:
     rows = []
     p_short, p_long = "cpu-800", "cpu-3000"

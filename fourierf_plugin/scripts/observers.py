@@ -21,3 +21,12 @@ def build_observers(config: TrainerConfig) -> list[TrainingObserver]:
 
         observers.append(LiveViewer(config.viewer_port, config.viewer_max_slowdown, config.viewer_host))
     return observers
+
+
+def after_training(observers: list[TrainingObserver], exit_code: int | None) -> None:
+    """Once training returned (``exit_code`` None) or stopped on a signal: a live viewer may keep showing the
+    finished run (``viewer.live``)."""
+    for observer in observers:
+        end = getattr(observer, "after_training", None)
+        if end is not None:
+            end(exit_code)

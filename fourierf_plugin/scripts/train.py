@@ -14,9 +14,10 @@ from fourierf_plugin.method_configs.finalize import ignored_on_resume
 from fourierf_plugin.method_configs.registry import HELP_REGISTRY
 from fourierf_plugin.method_configs.time_budget import parse_duration
 from fourierf_plugin.scripts.cli import run_cli, strip_verbose
-from fourierf_plugin.scripts.observers import build_observers
+from fourierf_plugin.scripts.observers import after_training, build_observers
 from fourierf_plugin.utils.console import get_console
 from fourierf_plugin.utils.errors import fail
+from fourierf_plugin.utils.interrupt import stop_cleanly
 
 
 def parse_args(args: list[str]) -> TrainerConfig:
@@ -76,11 +77,17 @@ def main(args: list[str] | None = None) -> None:
     config, notes = build_config(parse_args(argv), given_options(argv))
     for note in notes:
         get_console().print(note, soft_wrap=True)
-    Trainer(config, build_observers(config)).train()
+    observers = build_observers(config)
+    try:
+        Trainer(config, observers).train()
+    except SystemExit as stop:
+        after_training(observers, stop.code if isinstance(stop.code, int) else 1)
+        raise
+    after_training(observers, None)
 
 
 def entrypoint() -> None:
-    run_cli(main)
+    run_cli(stop_cleanly(main, "fourierf-train"))
 
 
 if __name__ == "__main__":

@@ -33,8 +33,9 @@ class ViewerConfig(RunOptions):
     the page, which has no password."""
     preview_side: int = 256
     """Pixels along the longer side of the preview shown while the camera moves."""
-    final_side: int = 768
-    """Pixels along the longer side of the picture rendered once the camera rests."""
+    final_side: int | None = None
+    """Pixels along the longer side of the picture rendered once the camera rests, drawn coarse to full (default:
+    the training images' longer side)."""
 
 
 @dataclass
@@ -62,7 +63,8 @@ def check_options(cfg: ViewerConfig) -> None:
             f"config file not found: {cfg.load_config}",
             "pass the config.json written in a run directory (outputs/<scene>/<method>/<timestamp>/config.json)",
         )
-    if not 16 <= cfg.preview_side <= cfg.final_side:
+    final = cfg.final_side if cfg.final_side is not None else max(cfg.preview_side, 16)
+    if not 16 <= cfg.preview_side <= final:
         fail(
             f"need 16 <= --preview-side <= --final-side, got {cfg.preview_side} and {cfg.final_side}",
             "e.g. --preview-side 256 --final-side 768",

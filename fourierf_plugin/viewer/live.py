@@ -11,10 +11,16 @@ libgomp stops spinning at barriers and every parallel op of the training pays fu
 process. On 2 cores a render thread with 2 threads slowed P-CPU training by ~50 % at a 10 % render budget (the cores
 stood idle a quarter of the time); with 1 thread its renders oversubscribed the cores and stalled the step's OpenMP
 threads (+19-43 %). viser's callbacks only record what the browser did; the page's work waits for the next step.
+
+What the page shows costs accordingly: the status (step, cutoffs, loss, PSNR) is refreshed every
+``STATUS_SECONDS`` whatever the budget (it is a line of text); each picture is sized to cost the budget's share of
+``PICTURE_SECONDS`` (scaled up on the page), so pictures come at a steady rate and the cutoff ramp is seen forming.
+When the run ends (Ctrl-C included) the page says so and carries on as a saved run's on the final weights.
 """
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 from pathlib import Path
@@ -29,16 +35,28 @@ from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.viewer.render_budget import RenderBudget
 from fourierf_plugin.viewer.render_service import PreviewQuality
 from fourierf_plugin.viewer.scene_view import held_out_views
-from fourierf_plugin.viewer.server import ViewerServer, ViewerSettings, open_server, require_viser
+from fourierf_plugin.viewer.server import ViewerServer, ViewerSettings, open_server, require_viser, served_url
 from fourierf_plugin.viewer.viewed_run import TrainingProgress, ViewedRun
 
 if TYPE_CHECKING:
     from fourierf_plugin.models.fourierf import FourieRFModel
     from fourierf_plugin.pipelines.base import Pipeline
 
-LIVE_SETTINGS = ViewerSettings(preview_side=128, final_side=384, preview_seconds=0.1, final_quality=PreviewQuality())
-"""Smaller and quicker pictures than for a saved run, the final one marched as a preview is (about half the time,
-close to the full render): every render second is taken from training."""
+PICTURE_SECONDS = 1.0
+"""The time between two pictures of the live page at its budget (each picture costs the budget's share of it)."""
+STATUS_SECONDS = 0.5
+"""The longest the page's status text waits for a refresh during training."""
+
+
+def live_settings(max_slowdown: float) -> ViewerSettings:
+    """Smaller pictures than for a saved run, marched as previews are, each costing ``max_slowdown`` of
+    ``PICTURE_SECONDS``: every render second is taken from training."""
+    return ViewerSettings(
+        preview_side=128,
+        preview_seconds=0.1,
+        final_quality=PreviewQuality(),
+        picture_seconds=max_slowdown * PICTURE_SECONDS,
+    )
 
 
 def snapshot(model: FourieRFModel) -> dict[str, Tensor]:
@@ -85,6 +103,8 @@ class LiveViewer:
         self._stopped = False
         self.snapshots = 0
         self._elapsed = 0.0
+        self._status_at = 0.0
+        self.status_refreshes = 0
 
     # -- the observer protocol ---------------------------------------------------------------------------------------
     def started(self, pipeline: Pipeline, run_dir: Path, start_step: int) -> None:
@@ -94,8 +114,9 @@ class LiveViewer:
         viewed.load_snapshot(snapshot(pipeline.model), start_step)
         datamanager = pipeline.datamanager
         view = ViewerServer(
-            self.server, viewed, datamanager.reference_outputs, None, LIVE_SETTINGS, render_thread=False
-        )
+            self.server, viewed, datamanager.reference_outputs, None, live_settings(self.budget.max_share or 1.0),
+            render_thread=False,
+        )  # fmt: skip
         self.view = self._page = view
 
         def show_test_views() -> None:
@@ -121,16 +142,28 @@ class LiveViewer:
         progress.step, progress.max_steps, progress.metrics = report.step, report.max_steps, report.metrics
         progress.f_density, progress.f_color = report.f_density, report.f_color
         self._elapsed = report.elapsed_s
-        if view.client_count == 0 or self.budget.wait_seconds() > 0:
+        if view.client_count == 0:
             return
         started = time.perf_counter()
-        if not view.due:  # the page shows everything it was asked for: show the newer weights
+        if started - self._status_at >= STATUS_SECONDS:  # whatever the budget: a line of text
+            view.refresh_status()
+            self._status_at = started
+            self.status_refreshes += 1
+        if self.budget.wait_seconds() > 0:
+            self.budget.charge(started, time.perf_counter() - started)
+            return
+        pictures = view.renders
+        if view.viewed.step != report.step:  # every picture shows the newest weights (the ramp as it happens)
             self._load_snapshot(view, pipeline, report.step)
         view.do_due_work()
-        self.budget.charge(started, time.perf_counter() - started)
+        cost = time.perf_counter() - started
+        self.budget.charge(started, cost)
+        if view.renders > pictures and view.live_pacer is not None and view.last_render_seconds is not None:
+            view.live_pacer.observe_overhead(cost - view.last_render_seconds)
 
     def finished(self, pipeline: Pipeline, step: int, interrupted: bool) -> None:
-        """Close the page with the run (Ctrl-C included)."""
+        """The run ended (Ctrl-C included): the page says so and shows the final weights as a saved run's page,
+        until :meth:`close`."""
         if self._stopped:
             return
         self._stopped = True
@@ -140,13 +173,46 @@ class LiveViewer:
             f"live viewer: {self.snapshots} snapshots, {self._page.renders if self._page else 0} pictures, "
             f"{spent:.1f} s of the training's time{share}"
         )
-        if self._page is None:
-            self.server.stop()
+        page = self._page
+        if page is None:
+            self.close()
             return
-        progress = self._page.viewed.progress
-        assert progress is not None
-        progress.finished = True
-        self._page.stop()
+        try:
+            progress = page.viewed.progress
+            assert progress is not None
+            progress.step, progress.finished, progress.interrupted = step, True, interrupted
+            progress.f_density, progress.f_color = page.viewed.model.cutoffs(step)
+            self._load_snapshot(page, pipeline, step)
+            page.become_saved_run()
+            self.view = page
+        except Exception as err:  # the page is a convenience: the run's end must not fail because of it
+            warn(f"the live viewer closes: {err}")
+            self.close()
+
+    def close(self) -> None:
+        """Stop the page (idempotent)."""
+        self._stopped = True
+        if self._page is not None:
+            self._page.stop()
+        else:
+            self.server.stop()
+
+    def after_training(self, exit_code: int | None) -> None:
+        """Once training has returned (``exit_code`` None) or stopped on a signal: keep showing the finished run
+        until Ctrl-C when a user is at the terminal and the run ended by itself or by Ctrl-C (130; another signal is
+        a scheduler's or a closed terminal's), else close the page."""
+        if self._page is None or not sys.stdin.isatty() or exit_code not in (None, 130):
+            self.close()
+            return
+        url = served_url(self._page.server.get_host(), self.port)
+        get_console().print(f"the viewer keeps showing the finished run at {url}: Ctrl-C closes it")
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            self.close()
 
     # -- snapshots ----------------------------------------------------------------------------------------------------
     def _load_snapshot(self, view: ViewerServer, pipeline: Pipeline, step: int) -> None:

@@ -43,7 +43,9 @@ class PreviewPacer:
     A preview's time is about proportional to its rays, and what a ray costs depends on the machine, its load (a
     browser or a training run on the same cores) and the view; so the cost per ray is learnt from the previews
     already rendered (the mean of the last estimate and the newest) and each preview renders the share of each side
-    that fits the target, between ``min_scale`` and 1, scaled up to the preview size afterwards."""
+    that fits the target, between ``min_scale`` and 1, scaled up to the preview size afterwards. Work around each
+    picture that is not the render (a snapshot, sending it) is learnt too (``observe_overhead``) and taken off the
+    target, down to a quarter of it."""
 
     def __init__(self, target_seconds: float, min_scale: float = 0.25, first_scale: float = 0.5) -> None:
         if not target_seconds > 0:
@@ -54,13 +56,15 @@ class PreviewPacer:
         self.min_scale = min_scale
         self.first_scale = first_scale
         self.seconds_per_ray: float | None = None
+        self.overhead_seconds = 0.0
 
     def render_size(self, width: int, height: int) -> tuple[int, int]:
         """(width, height) to render for a preview shown at ``width`` × ``height``."""
         if self.seconds_per_ray is None:
             scale = self.first_scale
         else:
-            fit = (self.target_seconds / (self.seconds_per_ray * width * height)) ** 0.5
+            target = max(0.25 * self.target_seconds, self.target_seconds - self.overhead_seconds)
+            fit = (target / (self.seconds_per_ray * width * height)) ** 0.5
             scale = min(1.0, max(self.min_scale, fit))
         return max(1, round(width * scale)), max(1, round(height * scale))
 
@@ -70,3 +74,8 @@ class PreviewPacer:
             return
         newest = seconds / rays
         self.seconds_per_ray = newest if self.seconds_per_ray is None else 0.5 * (self.seconds_per_ray + newest)
+
+    def observe_overhead(self, seconds: float) -> None:
+        """A picture's work besides its render took ``seconds``."""
+        if seconds >= 0:
+            self.overhead_seconds = 0.5 * (self.overhead_seconds + seconds)

@@ -21,7 +21,7 @@ import torch.nn.functional as F
 
 from fourierf_plugin.cameras.cameras import Cameras
 from fourierf_plugin.data.datamanager import camera_rays
-from fourierf_plugin.utils.colormaps import colorize_accumulation, colorize_depth, to_uint8
+from fourierf_plugin.utils.colormaps import colorize_accumulation, colorize_depth, depth_range, to_uint8
 
 if TYPE_CHECKING:
     from fourierf_plugin.models.fourierf import FourieRFModel
@@ -163,6 +163,8 @@ class Rendered:
     seconds: float
     rendered_size: tuple[int, int] | None = None
     """(width, height) the model rendered, when smaller than the pictures (scaled up to them); None: the same."""
+    depth_range: tuple[float, float] = (0.0, 1.0)
+    """The depths at the low and high ends of the depth picture's colormap (its legend)."""
 
     def image(self, output: Output) -> np.ndarray:
         return {"rgb": self.rgb, "depth": self.depth, "accumulation": self.accumulation}[output]
@@ -179,6 +181,7 @@ def render_view(
     abort: Callable[[], bool] | None = None,
     quality: PreviewQuality | None = None,
     render_size: tuple[int, int] | None = None,
+    progress: Callable[[float], None] | None = None,
 ) -> Rendered | None:
     """Render ``camera`` with the field low-passed at ``cutoffs`` (f_density, f_color), through the model's eval path.
 
@@ -187,7 +190,8 @@ def render_view(
 
     A preview passes ``quality`` (cheaper marching, ``preview_settings``) and may pass ``render_size`` (width,
     height) smaller than the camera's: the model then renders that many pixels and the pictures are scaled up
-    (bilinear) to the camera's size. Without both, the render is the model's own eval render.
+    (bilinear) to the camera's size. Without both, the render is the model's own eval render. ``progress`` is told
+    the share of rays done after each block.
 
     The field is left prepared at ``cutoffs``: the viewer owns the model it draws (a saved run's, or the live
     viewer's private copy), and the next picture at the same cutoffs and weights then reuses the filtering and the
@@ -208,6 +212,8 @@ def render_view(
             block = slice(i, i + RAYS_PER_BLOCK)
             rays = origins[block].to(device), directions[block].to(device)
             parts.append(model.render_rays(*rays, 0, cutoffs=cutoffs))
+            if progress is not None:
+                progress(min(1.0, (i + RAYS_PER_BLOCK) / origins.shape[0]))
     out = {key: torch.cat([p[key] for p in parts]) for key in ("rgb", "depth", "accumulation")}
     shape = (camera.height, camera.width)
     rgb_f = out["rgb"].view(*shape, 3).cpu()
@@ -221,7 +227,9 @@ def render_view(
         depth, acc = _upsample(depth[None], size)[0], _upsample(acc[None], size)[0].clamp(0.0, 1.0)
     seconds = time.perf_counter() - start
     rgb = to_uint8(rgb_f)
-    return Rendered(rgb, colorize_depth(depth, acc), colorize_accumulation(acc), seconds, rendered_size)
+    near, far = depth_range(depth, acc)
+    depth_picture = colorize_depth(depth, acc, near, far)
+    return Rendered(rgb, depth_picture, colorize_accumulation(acc), seconds, rendered_size, (near, far))
 
 
 def _upsample(image: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:

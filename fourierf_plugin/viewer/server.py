@@ -1,18 +1,23 @@
 """The web page: a viser server whose background is the model's render at each browser's camera, and its controls.
 
-Controls: which picture (rgb, depth, accumulation), the density and colour cutoffs (0 up to the run's own value at its
-step), the preview and final sizes, and "mesh at this cutoff". One background thread renders for every connected
-browser: a small preview while the camera (or a slider) moves, the final size once it has rested ``rest_seconds``.
-viser's own callbacks only record what changed, so the page never waits for the model.
+Controls: which picture (rgb, depth with its legend, accumulation), the density and colour cutoffs (0 up to the run's
+own value at its step), the preview and final sizes, "mesh at this cutoff", the camera-path editor
+(``viewer.camera_path_panel``) and, on a saved run, the checkpoint timeline (``viewer.timeline``). One background
+thread renders for every connected browser: a small preview while the camera (or a slider) moves, then the final
+size once it has rested ``rest_seconds``, coarse to full with its progress on the page. viser's own callbacks only
+record what changed, so the page never waits for the model.
 
 Without its own thread (``render_thread=False``) the page does nothing until its host calls :meth:`do_due_work`: the
-live viewer calls it from the training thread between steps (why: ``viewer.live``).
+live viewer calls it from the training thread between steps (why: ``viewer.live``), every picture sized to cost
+``picture_seconds``; when the run ends, :meth:`become_saved_run` starts the thread and the page carries on as a
+saved run's.
 """
 
 from __future__ import annotations
 
 import collections
 import contextlib
+import dataclasses
 import importlib
 import ipaddress
 import math
@@ -32,15 +37,20 @@ import torch
 from fourierf_plugin.exporter.marching_cubes import describe, export_field_mesh
 from fourierf_plugin.utils.console import get_console, warn
 from fourierf_plugin.utils.errors import UserError, fail
+from fourierf_plugin.viewer.camera_path_panel import CameraPathPanel
+from fourierf_plugin.viewer.page_text import depth_legend, final_progress, for_the_page, status_text
 from fourierf_plugin.viewer.render_budget import PreviewPacer, RenderBudget
 from fourierf_plugin.viewer.render_service import (
     OUTPUTS,
     Output,
     PreviewQuality,
+    Rendered,
+    ViewCamera,
     camera_from_opencv_pose,
     render_view,
 )
 from fourierf_plugin.viewer.scene_view import add_test_views, build_scene
+from fourierf_plugin.viewer.timeline import Timeline
 from fourierf_plugin.viewer.viewed_run import ViewedRun
 
 if TYPE_CHECKING:
@@ -181,8 +191,13 @@ def open_server(port: int, host: str = LOOPBACK) -> viser.ViserServer:
 class ViewerSettings:
     preview_side: int = 256
     """Pixels along the preview's longer side (shown while the camera moves)."""
-    final_side: int = 768
-    """Pixels along the final picture's longer side (shown once the camera rests)."""
+    final_side: int | None = None
+    """Pixels along the final picture's longer side (shown once the camera rests); None: the training images'."""
+    final_stages: tuple[float, ...] = (0.25, 0.5, 1.0)
+    """The final picture is drawn coarse to full at these shares of its side (those larger than the preview)."""
+    picture_seconds: float | None = None
+    """What every picture may cost (live training: the budget's share of the time between two pictures); each
+    renders the pixels that fit and is scaled up. None: previews are paced by ``preview_seconds``, finals full."""
     rest_seconds: float = 0.3
     """How long the camera must stay still before the final picture is rendered."""
     jpeg_quality: int = 90
@@ -267,6 +282,27 @@ def mesh_refusal(run_dir: Path, last_at: float | None, now: float) -> str | None
     return None
 
 
+def with_final_side(settings: ViewerSettings, train: DataparserOutputs) -> ViewerSettings:
+    """``settings`` with a final size: the one given, else the training images' longer side (within the slider's
+    range); a preview never larger than it."""
+    final = settings.final_side
+    if final is None:
+        low, high = FINAL_SIDES
+        final = min(high, max(low, train.cameras.width, train.cameras.height))
+    return dataclasses.replace(settings, final_side=final, preview_side=min(settings.preview_side, final))
+
+
+def stage_sizes(width: int, height: int, stages: tuple[float, ...], preview_side: int) -> list[tuple[int, int]]:
+    """(width, height) of the final picture's coarse-to-full stages: each share of ``stages`` whose longer side is
+    larger than the preview's (a coarser one shows nothing the preview did not), then the full size."""
+    sizes = []
+    for share in sorted(s for s in stages if 0 < s < 1):
+        size = (max(1, round(width * share)), max(1, round(height * share)))
+        if max(size) > preview_side and size not in sizes:
+            sizes.append(size)
+    return [*sizes, (width, height)]
+
+
 class ViewerServer:
     """The page's content and its render thread, on a running viser server (``open_server``)."""
 
@@ -284,9 +320,13 @@ class ViewerServer:
         """``render_thread=False``: no thread of its own; pictures and meshes are made only in :meth:`do_due_work`."""
         self.server = server
         self.viewed = viewed
-        self.settings = settings or ViewerSettings()
+        self.settings = with_final_side(settings or ViewerSettings(), train)
         self.budget = budget or RenderBudget(None)
         self.pacer = PreviewPacer(self.settings.preview_seconds)
+        self.live_pacer: PreviewPacer | None = None
+        if self.settings.picture_seconds is not None:
+            self.live_pacer = PreviewPacer(self.settings.picture_seconds, min_scale=0.1, first_scale=0.25)
+        self.train_size = (train.cameras.width, train.cameras.height)
         self.clock = clock
         self._clients: dict[int, _ClientView] = {}
         self._lock = threading.Lock()
@@ -305,6 +345,8 @@ class ViewerServer:
         self.log: collections.deque[RenderRecord] = collections.deque(maxlen=1000)
         self.layout, self.frustums = build_scene(server, train, test)
         self._build_gui()
+        self.camera_paths = CameraPathPanel(self)
+        self.timeline: Timeline | None = None if viewed.live else Timeline(self)
         server.on_client_connect(self.connect)
         server.on_client_disconnect(self._disconnected)
         self._thread: threading.Thread | None = None
@@ -325,7 +367,10 @@ class ViewerServer:
         gui = self.server.gui
         f_density, f_color = self.viewed.run_cutoffs()
         self.status = gui.add_markdown(self._status_text())
+        self.progress_text = gui.add_markdown("", visible=False)
+        self.progress_bar = gui.add_progress_bar(0.0, visible=False)
         self.output = gui.add_dropdown("Output", OUTPUTS, initial_value="rgb")
+        self.legend = gui.add_markdown("", visible=False)
         self.density_slider = gui.add_slider(
             "Density cutoff", 0.0, max(f_density, 0.01), 0.01, f_density, hint="share of the spectrum kept (0-1)"
         )
@@ -333,7 +378,7 @@ class ViewerServer:
             "Colour cutoff", 0.0, max(f_color, 0.01), 0.01, f_color, hint="share of the spectrum kept (0-1)"
         )
         self.preview_slider = gui.add_slider("Preview size", 32, 512, 32, self.settings.preview_side)
-        self.final_slider = gui.add_slider("Final size", 64, 2048, 32, self.settings.final_side)
+        self.final_slider = gui.add_slider("Final size", *FINAL_SIDES, 32, self.settings.final_side)
         self.show_cameras = gui.add_checkbox("Show cameras", True, hint="training views orange, test views blue")
         self.show_cameras.on_update(lambda _: self._show_cameras(self.show_cameras.value))
         self.mesh_button = gui.add_button("Mesh at this cutoff", hint="marching cubes at the density cutoff")
@@ -424,21 +469,8 @@ class ViewerServer:
 
     def _status_text(self) -> str:
         viewed = self.viewed
-        f_density, f_color = viewed.run_cutoffs()
-        lines = [f"**step** {viewed.step} · run cutoffs density {f_density:.2f}, colour {f_color:.2f}"]
-        progress = viewed.progress
-        if progress is not None:
-            state = "finished" if progress.finished else "training"
-            lines[0] = f"**{state}** step {progress.step} / {progress.max_steps} (shown: {viewed.step})"
-            numbers = [f"{k} {progress.metrics[k]:.4g}" for k in ("loss", "psnr") if k in progress.metrics]
-            lines.append(f"cutoffs density {progress.f_density:.2f}, colour {progress.f_color:.2f}")
-            if numbers:
-                lines.append(" · ".join(numbers))
-        if hasattr(self, "density_slider"):
-            lines.append(f"shown at density {self.cutoffs()[0]:.2f}, colour {self.cutoffs()[1]:.2f}")
-        if self.last_render_seconds is not None:
-            lines.append(f"last render {self.last_render_seconds:.2f} s")
-        return "  \n".join(lines)
+        shown = self.cutoffs() if hasattr(self, "density_slider") else None
+        return status_text(viewed.step, viewed.run_cutoffs(), viewed.progress, shown, self.last_render_seconds)
 
     # -- clients ----------------------------------------------------------------------------------------------------
     def connect(self, client: viser.ClientHandle) -> None:
@@ -503,6 +535,7 @@ class ViewerServer:
         if self.settings.render_threads is not None:
             torch.set_num_threads(self.settings.render_threads)  # per thread: training keeps its own count
         while not self._stop.is_set():
+            self._export_queued_meshes()
             self._wake.clear()  # before looking: a wake-up set after this is seen by the wait below
             job = self._next_job()
             if job is None:
@@ -515,6 +548,25 @@ class ViewerServer:
             if not self._run(job):
                 self._stop.wait(1.0)  # a failing render is not retried at full speed
 
+    def _export_queued_meshes(self) -> None:
+        """Meshes asked for while the page had no thread of its own (live training)."""
+        while self._mesh_requests:
+            self.export_mesh(self._mesh_requests.popleft())
+
+    def become_saved_run(self) -> None:
+        """The live run has ended: from now on the page works as a saved run's (its own render thread, no budget,
+        full-size final pictures, the checkpoint timeline), on the weights it was last given."""
+        self.live_pacer = None
+        self.budget = RenderBudget(None)
+        self.follow_run_cutoffs()
+        with contextlib.suppress(Exception):  # the timeline is a convenience: the page works without it
+            self.timeline = Timeline(self)
+        self.refresh_status()
+        self.changed(moving=False)
+        if self._thread is None and not self._stop.is_set():
+            self._thread = threading.Thread(target=self._render_loop, name="fourierf-viewer-render", daemon=True)
+            self._thread.start()
+
     def _run(self, job: tuple[_ClientView, tuple[int, int], bool]) -> bool:
         """Render one job; False when it failed (said aloud: a failed picture must not end the page or the run)."""
         self._rendering = True
@@ -525,6 +577,7 @@ class ViewerServer:
             return False
         finally:
             self._rendering = False
+            self._show_progress(None)
         return True
 
     @property
@@ -551,28 +604,57 @@ class ViewerServer:
         """A picture is being rendered or is due (a browser's view is out of date)."""
         return self._rendering or self._next_job() is not None
 
+    def _sizes(self, pose: ViewCamera, final: bool) -> list[tuple[int, int]]:
+        """(width, height) of each picture to render for this job: one paced picture live or for a preview, the
+        final picture's coarse-to-full stages otherwise."""
+        if self.live_pacer is not None:
+            return [self.live_pacer.render_size(pose.width, pose.height)]
+        if not final:
+            return [self.pacer.render_size(pose.width, pose.height)]
+        return stage_sizes(pose.width, pose.height, self.settings.final_stages, self.side(False))
+
     def _render(self, view: _ClientView, key: tuple[int, int], final: bool) -> None:
         camera = view.client.camera
-        side = self.side(final)
-        pose = camera_from_opencv_pose(camera.wxyz, camera.position, camera.fov, camera.aspect, side)
+        pose = camera_from_opencv_pose(camera.wxyz, camera.position, camera.fov, camera.aspect, self.side(final))
         output = self.output_name()
-        quality = self.settings.final_quality if final else self.settings.preview_quality
-        size = (pose.width, pose.height) if final else self.pacer.render_size(pose.width, pose.height)
-        started = time.perf_counter()
-        with self.viewed.lock:
-            rendered = render_view(
-                self.viewed.model,
-                pose,
-                self.cutoffs(),
-                abort=lambda: self._outdated(view, key),
-                quality=quality,
-                render_size=size,
-            )
-        self.budget.charge(started, time.perf_counter() - started)
-        if rendered is None:
-            return  # the camera or a control moved during the render: the next job is a preview (``_next_job``)
-        if not final:
-            self.pacer.observe(size[0] * size[1], rendered.seconds)
+        paced = self.live_pacer is not None or not final
+        quality = self.settings.preview_quality if paced else self.settings.final_quality
+        sizes = self._sizes(pose, final)
+        for stage, size in enumerate(sizes, start=1):
+            report = None
+            if not paced:
+                report = lambda f, stage=stage, size=size: self._show_progress(  # noqa: E731
+                    final_progress(stage, len(sizes), max(size), f), f
+                )
+            started = time.perf_counter()
+            with self.viewed.lock:
+                rendered = render_view(
+                    self.viewed.model,
+                    pose,
+                    self.cutoffs(),
+                    abort=lambda: self._outdated(view, key),
+                    quality=quality,
+                    render_size=size,
+                    progress=report,
+                )
+            self.budget.charge(started, time.perf_counter() - started)
+            if rendered is None:
+                return  # the camera or a control moved during the render: the next job is a preview (``_next_job``)
+            if paced:
+                (self.live_pacer or self.pacer).observe(size[0] * size[1], rendered.seconds)
+            self._send(view, key, final and stage == len(sizes), pose, size, rendered, output)
+
+    def _send(
+        self,
+        view: _ClientView,
+        key: tuple[int, int],
+        final: bool,
+        pose: ViewCamera,
+        size: tuple[int, int],
+        rendered: Rendered,
+        output: Output,
+    ) -> None:
+        """Put a rendered picture on the browser's screen and record it."""
         view.client.scene.set_background_image(
             rendered.image(output), format="jpeg", jpeg_quality=self.settings.jpeg_quality
         )
@@ -583,7 +665,22 @@ class ViewerServer:
         self.last_render_seconds = rendered.seconds
         self.renders += 1
         self.final_renders += int(final)
+        self.legend.visible = output == "depth"
+        if output == "depth":
+            self.legend.content = depth_legend(*rendered.depth_range)
         self.refresh_status()
+
+    def _show_progress(self, text: str | None, fraction: float = 0.0) -> None:
+        """The final picture's progress under the status (hidden when ``text`` is None)."""
+        if not hasattr(self, "progress_bar"):
+            return
+        if text is None:
+            if self.progress_bar.visible:
+                self.progress_bar.visible = self.progress_text.visible = False
+            return
+        self.progress_text.content = text
+        self.progress_bar.value = 100.0 * fraction
+        self.progress_bar.visible = self.progress_text.visible = True
 
     # -- mesh -------------------------------------------------------------------------------------------------------
     def export_mesh(self, client: viser.ClientHandle | None = None) -> Path | None:
@@ -609,6 +706,7 @@ class ViewerServer:
         except UserError as err:
             message, path = f"no mesh at cutoff {f_density:.3f}: {err.problem}", None
             warn(message)
+            message = for_the_page(message)
         finally:
             self.mesh_button.disabled = False
         if client is not None:

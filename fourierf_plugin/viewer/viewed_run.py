@@ -27,6 +27,8 @@ class TrainingProgress:
     f_density: float = 1.0
     f_color: float = 1.0
     finished: bool = False
+    interrupted: bool = False
+    """Finished by Ctrl-C or another stop signal before its last step."""
 
 
 class ViewedRun:

@@ -3,8 +3,9 @@ records the pictures sent to it, so the render thread is tested without a browse
 
 from __future__ import annotations
 
+import contextlib
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -58,3 +59,7 @@ class FakeClient:
 
     def add_notification(self, title: str, body: str, **_: object) -> None:
         self.notifications.append((title, body))
+
+    @contextlib.contextmanager
+    def atomic(self) -> Iterator[None]:
+        yield

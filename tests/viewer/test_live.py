@@ -55,8 +55,8 @@ def _records(run_dir: Path) -> list[dict]:
 
 
 def test_the_live_viewer_draws_snapshots_and_leaves_training_unchanged(tmp_path: Path, monkeypatch) -> None:
-    """Also: every picture is made on the training thread (a second thread computing with torch would give OpenMP a
-    second worker team, which slows every later training step on a CPU: ``viewer.live``)."""
+    """Also: every picture during training is made on the training thread (a second thread computing with torch
+    would give OpenMP a second worker team, which slows every later training step on a CPU: ``viewer.live``)."""
     require_module("viser", VISER_WHY)
     from fourierf_plugin.viewer import server as server_module
     from fourierf_plugin.viewer.live import LiveViewer
@@ -65,7 +65,8 @@ def test_the_live_viewer_draws_snapshots_and_leaves_training_unchanged(tmp_path:
     real_render = server_module.render_view
 
     def recorded(*args, **kwargs):
-        drawn_on.append(threading.current_thread())
+        if not viewer._stopped:  # during training (the finished page has its own render thread)
+            drawn_on.append(threading.current_thread())
         return real_render(*args, **kwargs)
 
     monkeypatch.setattr(server_module, "render_view", recorded)
@@ -77,13 +78,16 @@ def test_the_live_viewer_draws_snapshots_and_leaves_training_unchanged(tmp_path:
     browser = BrowserAtStart(viewer)
     watched = Trainer(tiny_trainer_config(tmp_path / "watched", iters=ITERS), observers=[viewer, browser])
     watched_dir = watched.train()
+    viewer.close()
 
     assert browser.page is not None and "<html" in browser.page.lower()
     assert viewer.snapshots >= 1
     images = browser.client.scene.images
     assert images, "the render thread drew nothing for the connected browser"
     height, width = images[-1].shape[:2]
-    assert max(height, width) in (128, 384)  # the live preview or final size
+    settings = viewer.view.settings
+    assert max(height, width) in (settings.preview_side, settings.final_side)  # shown at the preview or final size
+    assert settings.final_side == 100, "the final size is the training images' (100 px)"
     assert viewer.view is not None and viewer.view.viewed.progress.finished
     assert drawn_on and set(drawn_on) == {threading.current_thread()}, "a picture was made off the training thread"
 
@@ -94,21 +98,42 @@ def test_the_live_viewer_draws_snapshots_and_leaves_training_unchanged(tmp_path:
         assert torch.equal(value, watched_state[name]), name
 
 
-def test_the_live_viewer_stops_its_page_at_the_end(tmp_path: Path) -> None:
+def _answers(port: int) -> bool:
+    try:
+        urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=1).close()
+    except OSError:
+        return False
+    return True
+
+
+def test_at_the_end_the_page_shows_the_finished_run_until_closed(tmp_path: Path) -> None:
     require_module("viser", VISER_WHY)
     from fourierf_plugin.viewer.live import LiveViewer
 
     viewer = LiveViewer(port=0, max_slowdown=0.1, host="127.0.0.1")
-    Trainer(tiny_trainer_config(tmp_path, iters=5), observers=[viewer]).train()
-    deadline = time.monotonic() + 10
+    browser = BrowserAtStart(viewer)
+    trainer = Trainer(tiny_trainer_config(tmp_path, iters=5), observers=[viewer, browser])
+    trainer.train()
+    try:
+        page = viewer.view
+        assert page is not None and _answers(viewer.port), "the page closed with the run"
+        assert "finished at step 5" in page.status.content
+        assert page.viewed.step == 5 and page.live_pacer is None and page._thread is not None  # a saved run's page
+        drawn = len(browser.client.scene.images)
+        browser.client.camera.move_to(trainer.pipeline.datamanager.reference_outputs.cameras, 1)
+        assert _wait_for(lambda: len(browser.client.scene.images) > drawn), "the finished page draws no new view"
+    finally:
+        viewer.after_training(None)  # not at a terminal: closes the page
+    assert _wait_for(lambda: not _answers(viewer.port)), "the page still answers after it was closed"
+
+
+def _wait_for(condition, seconds: float = 20.0) -> bool:
+    deadline = time.monotonic() + seconds
     while time.monotonic() < deadline:
-        try:
-            urllib.request.urlopen(f"http://127.0.0.1:{viewer.port}/", timeout=1).close()
-        except OSError:
-            break
-        time.sleep(0.2)
-    else:
-        pytest.fail("the page still answers after training ended")
+        if condition():
+            return True
+        time.sleep(0.1)
+    return False
 
 
 def test_a_slowdown_outside_0_1_is_a_user_error() -> None:

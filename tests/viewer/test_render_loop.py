@@ -44,7 +44,7 @@ class ScriptedRenders:
         self.calls: queue.Queue[Call] = queue.Queue()
         self.closed = threading.Event()
 
-    def __call__(self, model, camera, cutoffs, abort=None, quality=None, render_size=None):
+    def __call__(self, model, camera, cutoffs, abort=None, quality=None, render_size=None, progress=None):
         if self.closed.is_set():
             return None
         call = Call(camera, quality is not None, abort, torch.get_num_threads(), threading.Event())
@@ -181,7 +181,7 @@ def test_a_page_without_its_own_thread_works_only_when_its_host_asks(trained_run
     trainer, run_dir = trained_run
     threads: list[threading.Thread] = []
 
-    def render_here(model, camera, cutoffs, abort=None, quality=None, render_size=None):
+    def render_here(model, camera, cutoffs, abort=None, quality=None, render_size=None, progress=None):
         threads.append(threading.current_thread())
         blank = np.zeros((camera.height, camera.width, 3), dtype=np.uint8)
         return Rendered(blank, blank, blank, 0.01)

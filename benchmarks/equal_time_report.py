@@ -133,13 +133,14 @@ def stage_time(rows: Sequence[dict]) -> str:
 
 def section(rows: Sequence[dict], suite: Suite) -> list[str]:
     machines = "; ".join(sorted({r["machine"] for r in rows})) or "none yet"
+    side = 400 // suite.protocols[suite.equal_time["protocol"]].lego_downscale  # Blender's images are 400×400
     body = section_head(
         "Equal-time comparison",
         COMMAND,
         "Each point is a user's run: `fourierf-train METHOD --time-budget B --threads 1`, sized for the scene and "
         "the machine, the short-run rules applying as they would, then `fourierf-eval` on the test views. Scenes "
-        "and budgets: `[equal_time]` in `benchmarks/suite.toml`; lego at 100×100. Times are training seconds from "
-        "each run's metrics (setup and evaluation not included).",
+        f"and budgets: `[equal_time]` in `benchmarks/suite.toml`; lego at {side}×{side}. Times are training seconds "
+        "from each run's metrics (setup and evaluation not included).",
         machine=f"{machines}, one thread a run",
     )
     if not rows:

@@ -49,6 +49,8 @@ from harness import (
     train_and_eval,
 )
 
+from fourierf_plugin.utils.errors import UserError
+
 SUITE = load_suite()
 Point = tuple[str, str, str, Run]
 """(scene, protocol, setting, run)."""
@@ -323,7 +325,10 @@ def main() -> None:
         if not (args.data / SUITE.scenes[scene]["path"]).exists():
             sys.exit(f"error: {scene} not found under {args.data}; pass --data FOLDER")
     if args.stage == "equal-time":
-        points, skipped = equal_time.plan(SUITE, args.scene, args.budget, equal_time.known_methods())
+        try:
+            points, skipped = equal_time.plan(SUITE, args.scene, args.budget, equal_time.known_methods())
+        except UserError as err:  # a --budget that is no duration
+            sys.exit(f"error: --budget: {err}")
         print("\n".join(skipped), flush=True)
         run_all([equal_time_job(p, args) for p in points], args)
         return

@@ -173,3 +173,14 @@ def test_budget_outside_the_equal_time_stage_is_one_clear_error(tmp_path: Path) 
     done = subprocess.run([sys.executable, str(SCRIPT), "sweep", "--budget", "1m", "--work", str(tmp_path)],
                           capture_output=True, text=True)  # fmt: skip
     assert done.returncode != 0 and "--budget" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_a_budget_that_is_no_duration_is_one_clear_error(tmp_path: Path) -> None:
+    data = tmp_path / "data"
+    for scene in SUITE.scenes.values():
+        (data / scene["path"]).mkdir(parents=True)
+    done = subprocess.run([sys.executable, str(SCRIPT), "equal-time", "--budget", "5 minutes", "--data", str(data),
+                           "--work", str(tmp_path / "w"), "--results", str(tmp_path / "r.jsonl")],
+                          capture_output=True, text=True)  # fmt: skip
+    assert done.returncode != 0 and "--budget" in done.stderr and "5 minutes" in done.stderr
+    assert "Traceback" not in done.stderr and not (tmp_path / "r.jsonl").exists()

@@ -5,7 +5,7 @@ has a curriculum, its factors, the declared background, a half-open range of ite
 in a line; ``docs/defaults.md`` holds each row's evidence under the row's name. The rows were chosen on VM fields; a
 CP field gets every row whose mechanism does not depend on the factors' shape (the optimiser, the curriculum, the
 background, the regulariser, the schedule) and not those that do (component counts, the TV weights on the planes).
-A generated field (ZeroRF) matches no row: the paper compares it at its published settings.
+A generated field (ZeroRF) and an MLP (FreeNeRF) match no row: the paper compares them at their published settings.
 
 A flag the user typed always wins; ``--budget-rule False`` (``fourierf-vm-paper`` is ``fourierf-vm`` with it off)
 keeps the preset's values at any budget.
@@ -21,13 +21,15 @@ from typing import Any
 
 from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.method_configs.scene_presets import apply_settings, generated_field
+from fourierf_plugin.models.freenerf import mlp_config
 
 PAPER_ITERATIONS = 10_000
 """The paper's budget: runs this long or longer keep the paper's values."""
 
 OBJECT, FORWARD_FACING = "object", "forward-facing"
 TRAINED_FIELDS = ("vm", "cp")
-"""The fields a row may name: TensoRF's trained factors (a generated field is ``"generated"`` and matches no row)."""
+"""The fields a row may name: TensoRF's trained factors (a generated field, ``"generated"``, and an MLP, ``"mlp"``,
+match no row)."""
 
 
 @dataclass(frozen=True)
@@ -40,6 +42,14 @@ class AtStep:
         return round(self.step / iterations, 4)
 
 
+def field_kind(config: TrainerConfig) -> str:
+    """What a run's field is, for the rows: ``generated`` (ZeroRF), ``mlp`` (FreeNeRF) or the factors' ``vm``/``cp``."""
+    model = config.pipeline.model
+    if generated_field(config):
+        return "generated"
+    return "mlp" if mlp_config(model) is not None else model.field.decomposition
+
+
 @dataclass(frozen=True)
 class Run:
     """What a row matches on: the run's properties, never its preset's name."""
@@ -50,7 +60,7 @@ class Run:
     curriculum: bool
     """Whether the field has FourieRF's frequency curriculum (``pipeline.model.fourier.enabled``)."""
     field: str
-    """``vm``, ``cp`` or ``generated``."""
+    """``vm``, ``cp``, ``generated`` or ``mlp`` (FreeNeRF's network)."""
     iterations: int
     background: str
     """The background the scene declares."""
@@ -61,7 +71,7 @@ class Run:
         return cls(
             scene=OBJECT if config.scene_preset == "synthetic" else FORWARD_FACING,
             curriculum=model.fourier.enabled,
-            field="generated" if generated_field(config) else model.field.decomposition,
+            field=field_kind(config),
             iterations=config.max_num_iterations,
             background=background,
         )

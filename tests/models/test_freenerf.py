@@ -3,17 +3,22 @@ resume and its option checks."""
 
 from __future__ import annotations
 
+import copy
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 import torch
 
+from fourierf_plugin.engine.estimates import checkpoint_bytes, estimate_seconds
 from fourierf_plugin.engine.optimizers import OptimizerConfig, warmup_scale
 from fourierf_plugin.engine.trainer import Trainer
 from fourierf_plugin.field_components.frequency_mask import band_mask, encode, encoded_width
 from fourierf_plugin.fields.mlp_field import MLPField, MLPFieldConfig, parameter_count
+from fourierf_plugin.method_configs import all_methods
+from fourierf_plugin.method_configs.budget import Run, rules_for
 from fourierf_plugin.models.freenerf import FreeNeRFModelConfig
 from fourierf_plugin.scripts.eval import EvalConfig, run_eval
 from fourierf_plugin.scripts.train import build_config, parse_args
@@ -129,6 +134,25 @@ def test_the_preset_has_no_short_run_rule_and_refuses_one(tmp_path: Path) -> Non
     assert config.pipeline.effects.occlusion_regularization
     with pytest.raises(UserError, match="--budget-rule"):
         tiny_trainer_config(tmp_path, "freenerf", iters=20, extra=["--budget-rule", "True"])
+
+
+@pytest.mark.parametrize("iterations", [100, 800, 1000, 3000, 9999])
+@pytest.mark.parametrize("scene", ["synthetic", "real"])
+def test_no_short_run_rule_matches_an_mlp_field(iterations: int, scene: str) -> None:
+    config = replace(all_methods["freenerf"], max_num_iterations=iterations, scene_preset=scene)
+    run = Run.of(config, "white")
+    assert run.field == "mlp"
+    assert rules_for(run) == []
+
+
+def test_the_cost_estimate_counts_the_network_per_sample() -> None:
+    config = replace(all_methods["freenerf"], max_num_iterations=800)
+    wide = copy.deepcopy(config)
+    wide.pipeline.model.mlp.width = 512
+    assert estimate_seconds(wide, 2) > 3 * estimate_seconds(config, 2) > 0
+    assert estimate_seconds(config, 2) > 10 * estimate_seconds(replace(all_methods["fourierf-vm"]), 2)
+    weights = parameter_count(config.pipeline.model.mlp)
+    assert checkpoint_bytes(config, 0) == pytest.approx(weights * 12 + 1e6)
 
 
 @pytest.mark.parametrize(

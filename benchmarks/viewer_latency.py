@@ -1,4 +1,5 @@
-"""Viewer benchmark (issue 18): camera-move-to-preview latency, and the training slowdown of ``--viewer``.
+"""Viewer benchmark: camera-move-to-preview latency, the final picture's time, and the training slowdown of
+``--viewer``.
 
 (a) Latency: the P-CPU final state of lego (fourierf-vm, views r_27 r_76 r_97 r_99, 100×100, 64³ → 128³, 800
     iterations; trained here first unless ``--run`` names its config.json) served by ``fourierf-viewer``'s ``serve``
@@ -7,7 +8,9 @@
     first preview of the new view is handed to the page's connection. Median and range over ``--moves`` moves;
     target ≤ 0.5 s. Reported beside it: the pixels the previews rendered (a preview renders what fits the page's
     ``preview_seconds`` and is scaled up to 256×256), their render times, and the model's full-quality render of
-    a 256×256 view (the final picture's path) without a browser drawing.
+    a 256×256 view (the final picture's path) without a browser drawing. The final picture: the page at its
+    default sizes (the final one the training images' side, drawn coarse to full), the time from a move to the full
+    picture handed to the page, median over the moves.
 (b) Slowdown: the same P-CPU training in three arms (``ARMS``: no viewer; the page open in one headless browser
     with the viewer drawing almost nothing; the viewer at its default budget with the browser), interleaved round by
     round in this one invocation with the order rotating, same flags, same seed; training seconds from each run's
@@ -213,6 +216,37 @@ def measure_latency(handle: ViewerHandle, moves: int) -> dict:
     }
 
 
+def measure_final(handle: ViewerHandle, moves: int) -> dict:
+    """Seconds from a camera command to the full-size final picture sent afterwards (every stage included)."""
+    view = handle.view
+    wait_for(lambda: view.client_count > 0, 60, "the browser to connect")
+    wait_for(lambda: view.final_renders > 0, 120, "the first final render")
+    client = next(iter(view.server.get_clients().values()))
+    seconds, sizes = [], set()
+    for position, target in orbit_moves(handle, moves):
+        wait_for(lambda: not view.busy, 120, "the renderer to finish")
+        count = len(view.log)
+        started = time.perf_counter()
+        with client.atomic():
+            client.camera.position = position
+            client.camera.look_at = target
+        wait_for(lambda c=count: any(r.final for r in list(view.log)[c:]), 120, "the final picture after a move")
+        record = next(r for r in list(view.log)[count:] if r.final)
+        seconds.append(record.sent_at - started)
+        sizes.add(f"{record.width}×{record.height}")
+    return {"seconds": seconds, "median": statistics.median(seconds), "sizes": sorted(sizes)}
+
+
+def final_on(config: Path, moves: int) -> dict:
+    """``measure_final`` on a page served at ``fourierf-viewer``'s default sizes."""
+    handle = serve(ViewerConfig(load_config=config, port=free_port(), host="127.0.0.1"))
+    try:
+        with headless_page(handle.url):
+            return measure_final(handle, moves)
+    finally:
+        handle.stop()
+
+
 def latency_on(config: Path, moves: int) -> dict:
     handle = serve(
         ViewerConfig(load_config=config, port=free_port(), host="127.0.0.1", preview_side=256, final_side=512)
@@ -233,7 +267,8 @@ def train_with_browser(cmd: list[str], port: int, log: Path) -> float:
         time.sleep(2.0)  # the browser's own start-up settles
         cpu_before = browser_cpu_seconds()
         with log.open("w") as fh:
-            proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=REPO)
+            # No terminal on stdin: the run closes its page when it ends instead of serving the finished run.
+            proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=fh, stderr=subprocess.STDOUT, cwd=REPO)
         try:
             url = f"http://127.0.0.1:{port}/"
             wait_for(lambda: proc.poll() is not None or page_up(url), 300, "the training's viewer page")
@@ -363,7 +398,7 @@ def screenshots(config: Path, docs: Path) -> list[Path]:
 
 
 # -- report ------------------------------------------------------------------------------------------------------------
-def section(latency: dict, ab: dict, command: str, iters: int, rounds: int) -> list[str]:
+def section(latency: dict, final: dict, ab: dict, command: str, iters: int, rounds: int) -> list[str]:
     lats = latency["latencies"]
     lat = ", ".join(f"{s:.2f}" for s in lats)
     sides = latency["rendered_sides"]
@@ -400,6 +435,9 @@ def section(latency: dict, ab: dict, command: str, iters: int, rounds: int) -> l
         f"| {side_range} px, {statistics.median(secs):.2f} s | |",
         "| for comparison: full-quality render of a 256×256 view (the final picture's path; median of 5, browser"
         f" connected) | {latency['render_only_median']:.2f} s | |",
+        f"| camera move → full final picture at the default size ({', '.join(final['sizes'])}), median (range) of "
+        f"{len(final['seconds'])} moves | {final['median']:.2f} s ({min(final['seconds']):.2f}–"
+        f"{max(final['seconds']):.2f}) | |",
         f"| training seconds: no viewer / browser on the page / viewer + browser | {listed(seconds['plain'])} / "
         f"{listed(seconds['browser'])} / {listed(seconds['viewer'])} | |",
         f"| slowdown with the viewer and the browser, whole run (median / median - 1) | {verdict(ab['slowdown'])} "
@@ -474,9 +512,11 @@ def main(argv: list[str] | None = None) -> None:
 
     latency = latency_on(config, args.moves)
     print(f"latency median {latency['median']:.2f} s ({latency['sizes']})", flush=True)
+    final = final_on(config, args.moves)
+    print(f"final picture median {final['median']:.2f} s ({final['sizes']})", flush=True)
     ab = measure_slowdown(data, args.work, args.rounds, args.iters, args.smoke)
     command = "python " + " ".join(["benchmarks/viewer_latency.py", *(argv if argv is not None else sys.argv[1:])])
-    body = section(latency, ab, command, args.iters, args.rounds)
+    body = section(latency, final, ab, command, args.iters, args.rounds)
     print("\n".join(body))
     if args.smoke:
         smoke_md = args.work / "BENCHMARKS.md"

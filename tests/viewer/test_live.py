@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import signal
 import threading
 import time
 import urllib.request
@@ -124,6 +126,41 @@ def test_at_the_end_the_page_shows_the_finished_run_until_closed(tmp_path: Path)
         assert _wait_for(lambda: len(browser.client.scene.images) > drawn), "the finished page draws no new view"
     finally:
         viewer.after_training(None)  # not at a terminal: closes the page
+    assert _wait_for(lambda: not _answers(viewer.port)), "the page still answers after it was closed"
+
+
+class CtrlCAt:
+    """Presses Ctrl-C (SIGINT to this process) after a given step, as a user at the terminal would."""
+
+    def __init__(self, step: int) -> None:
+        self.step = step
+
+    def started(self, pipeline: Pipeline, run_dir: Path, start_step: int) -> None:
+        pass
+
+    def step_done(self, pipeline: Pipeline, report: StepReport) -> None:
+        if report.step == self.step:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    def finished(self, pipeline: Pipeline, step: int, interrupted: bool) -> None:
+        pass
+
+
+def test_ctrl_c_is_shown_on_the_page_which_stays_open(tmp_path: Path) -> None:
+    require_module("viser", VISER_WHY)
+    from fourierf_plugin.viewer.live import LiveViewer
+
+    viewer = LiveViewer(port=0, max_slowdown=0.1, host="127.0.0.1")
+    trainer = Trainer(tiny_trainer_config(tmp_path, iters=50), observers=[viewer, BrowserAtStart(viewer), CtrlCAt(3)])
+    try:
+        with pytest.raises(SystemExit) as stop:
+            trainer.train()
+        assert stop.value.code == 130
+        page = viewer.view
+        assert page is not None and _answers(viewer.port), "the page closed on Ctrl-C"
+        assert "stopped (interrupted) at step 3" in page.status.content and page.viewed.step == 3
+    finally:
+        viewer.after_training(130)  # not at a terminal: closes the page
     assert _wait_for(lambda: not _answers(viewer.port)), "the page still answers after it was closed"
 
 

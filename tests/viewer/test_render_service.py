@@ -208,3 +208,23 @@ def test_the_pacer_renders_as_many_pixels_as_fit_the_preview_time() -> None:
     assert slow.render_size(256, 128) == (64, 32)  # never less than min_scale of each side
     with pytest.raises(ValueError, match="target_seconds"):
         PreviewPacer(0.0)
+
+
+def test_the_pacer_takes_the_work_around_a_picture_off_its_target() -> None:
+    pacer = PreviewPacer(0.2, min_scale=0.01)
+    pacer.observe(100 * 100, 0.2)  # 100² rays fit the whole target
+    assert pacer.render_size(100, 100) == (100, 100)
+    pacer.observe_overhead(0.3)  # a snapshot and sending take 0.15 s (the mean with none): 0.05 s left to render
+    assert pacer.render_size(100, 100) == (50, 50)
+    pacer.observe_overhead(10.0)  # the render keeps at least a quarter of the target
+    assert pacer.render_size(100, 100) == (50, 50)
+
+
+def test_a_render_reports_its_progress_and_its_depth_range(trained_run) -> None:
+    trainer, _ = trained_run
+    camera = camera_from_dataset(_test_cameras(trainer), 1).resized(160, 160)  # 25600 rays: two blocks
+    seen: list[float] = []
+    rendered = render_view(trainer.pipeline.model, camera, (1.0, 1.0), progress=seen.append)
+    assert rendered is not None and seen == [RAYS_PER_BLOCK / 25600, 1.0]
+    near, far = rendered.depth_range
+    assert 0 < near < far, "the legend's range: the depths at the colormap's two ends"

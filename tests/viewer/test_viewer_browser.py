@@ -213,7 +213,7 @@ def test_the_live_page_shows_the_curriculum_forming_and_the_run_ending(tmp_path:
     gaps = np.diff(times)
     span = times[-1] - times[0]
     assert len(steps) - 1 >= span - 1.0, f"{len(steps)} status updates in {span:.1f} s: fewer than one a second"
-    assert gaps.max() < 2.5, f"the status stood still for {gaps.max():.1f} s"
+    assert gaps.max() < 3.0, f"the status stood still for {gaps.max():.1f} s"
 
 
 # -- a camera path made on the page -----------------------------------------------------------------------------------

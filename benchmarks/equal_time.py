@@ -38,14 +38,16 @@ class Point:
 
 
 def plan(
-    suite: Suite, scenes: Sequence[str], budgets: Sequence[str], known: Collection[str]
+    suite: Suite, scenes: Sequence[str], budgets: Sequence[str], known: Collection[str],
+    only: Sequence[str] | None = None,
 ) -> tuple[list[Point], list[str]]:
-    """The points of the suite's methods on ``scenes`` at ``budgets``, longest budget first (two jobs at once end on
-    short runs), and a line for each method the registry does not know (skipped)."""
-    methods = [m for m in suite.equal_time["methods"] if m in known]
+    """The points of the suite's methods (or ``only`` those) on ``scenes`` at ``budgets``, longest budget first (two
+    jobs at once end on short runs), and a line for each method the registry does not know (skipped)."""
+    wanted = only or suite.equal_time["methods"]
+    methods = [m for m in wanted if m in known]
     skipped = [
         f"skipped {m}: no such method in this install's registry (known: {', '.join(sorted(known))})"
-        for m in suite.equal_time["methods"]
+        for m in wanted
         if m not in known
     ]
     longest_first = sorted(budgets, key=parse_duration, reverse=True)

@@ -272,7 +272,8 @@ def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argpa
                     help="equal-time: the --time-budget of each point (default: the suite's budgets)")  # fmt: skip
     ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
     ap.add_argument("--only", nargs="+", default=None, help="sweep only these settings (names from suite.toml)")
-    ap.add_argument("--methods", nargs="+", choices=suite.methods, default=None, help="run only these methods")
+    every_method = dict.fromkeys([*suite.methods, *suite.equal_time["methods"]])
+    ap.add_argument("--methods", nargs="+", choices=tuple(every_method), default=None, help="run only these methods")
     ap.add_argument("--seeds", nargs="+", type=int, choices=suite.seeds[1:], default=None,
                     help="the seeds stage runs only these of the later seeds (default: all)")  # fmt: skip
     ap.add_argument("--jobs", type=int, default=1, help="trainings at once")
@@ -291,6 +292,9 @@ def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argpa
     if args.budget is not None and not timed:
         sys.exit(f"error: --budget sets the equal-time stage's budgets; drop it for the {args.stage} stage")
     args.budget = args.budget or list(suite.equal_time["budgets"])
+    stage_methods = suite.equal_time["methods"] if timed else suite.methods
+    if set(args.methods or ()) - set(stage_methods):
+        sys.exit(f"error: --methods: the {args.stage} stage runs {', '.join(stage_methods)}; pass some of those")
     if args.protocol is None:
         args.protocol = ["cpu-3000"] if args.stage == "curve" else ["cpu-800", "mid-3000", "mid-800"]
     if args.threads < 1:
@@ -326,7 +330,8 @@ def main() -> None:
             sys.exit(f"error: {scene} not found under {args.data}; pass --data FOLDER")
     if args.stage == "equal-time":
         try:
-            points, skipped = equal_time.plan(SUITE, args.scene, args.budget, equal_time.known_methods())
+            known = equal_time.known_methods()
+            points, skipped = equal_time.plan(SUITE, args.scene, args.budget, known, args.methods)
         except UserError as err:  # a --budget that is no duration
             sys.exit(f"error: --budget: {err}")
         print("\n".join(skipped), flush=True)

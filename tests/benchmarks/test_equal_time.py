@@ -68,6 +68,8 @@ def test_the_plan_runs_longest_budgets_first_and_skips_unknown_methods() -> None
     assert len({p.key for p in points}) == len(points)
     unknown = set(SUITE.equal_time["methods"]) - {"fourierf-vm", "zerorf-vm"}
     assert len(skipped) == len(unknown) and all(any(m in line for line in skipped) for m in unknown)
+    only, skipped = equal_time.plan(SUITE, ["fern"], ["1m"], {"fourierf-vm", "zerorf-vm"}, ["zerorf-vm", "nerf"])
+    assert [p.key for p in only] == ["fern/zerorf-vm/1m"] and len(skipped) == 1 and "nerf" in skipped[0]
 
 
 @pytest.fixture

@@ -377,8 +377,8 @@ class ViewerServer:
         self.color_slider = gui.add_slider(
             "Colour cutoff", 0.0, max(f_color, 0.01), 0.01, f_color, hint="share of the spectrum kept (0-1)"
         )
-        self.preview_slider = gui.add_slider("Preview size", 32, 512, 32, self.settings.preview_side)
-        self.final_slider = gui.add_slider("Final size", *FINAL_SIDES, 32, self.settings.final_side)
+        self.preview_slider = gui.add_slider("Preview size", *PREVIEW_SIDES, 1, self.settings.preview_side)
+        self.final_slider = gui.add_slider("Final size", *FINAL_SIDES, 1, self.settings.final_side)
         self.show_cameras = gui.add_checkbox("Show cameras", True, hint="training views orange, test views blue")
         self.show_cameras.on_update(lambda _: self._show_cameras(self.show_cameras.value))
         self.mesh_button = gui.add_button("Mesh at this cutoff", hint="marching cubes at the density cutoff")

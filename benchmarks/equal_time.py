@@ -21,6 +21,8 @@ from fourierf_plugin.method_configs.time_budget import parse_duration
 THREADS = 1
 """One thread a run: a CPU run is then bit-reproducible, and two run side by side on two cores."""
 TOO_SHORT = re.compile(r"--time-budget \S+ is too short[^\n]*")
+ESTIMATE = re.compile(r"~([0-9.e+-]+) s per iteration")
+"""The trainer's own estimate in its too-short message: a method too slow for every budget still gets a speed."""
 
 
 @dataclass(frozen=True)
@@ -82,6 +84,8 @@ def execute(point: Point, suite: Suite, data: Path, work: Path, lpips: Path, job
         message = too_short(scene_work / f"{run.key}.train.log")
         if message is None:
             raise
+        estimate = ESTIMATE.search(message)
+        row |= {"estimated_seconds_per_iteration": float(estimate.group(1))} if estimate else {}
         return row | {"too_short": message, "seconds": time.perf_counter() - started}
     done = done_record(read_metrics(Path(trained["run_dir"]) / "metrics.jsonl")) or {}
     iterations, seconds = int(done["step"]), float(done["train_seconds"])

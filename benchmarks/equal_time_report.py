@@ -62,13 +62,25 @@ def time_cell(points: Sequence[tuple[float, float]], target: float) -> str:
     return ("≤ " if found[1] else "") + duration(found[0])
 
 
-def speed_ratio(rows: Sequence[dict], scene: str, method: str, baseline: str) -> float | None:
-    """A method's mean seconds per iteration over the baseline's, on one scene (None: either has no trained row)."""
-    own, base = trained(rows, scene, method), trained(rows, scene, baseline)
-    if not own or not base:
-        return None
-    mean = [sum(r["seconds_per_iteration"] for r in x) / len(x) for x in (own, base)]
-    return mean[0] / mean[1]
+def seconds_per_iteration(rows: Sequence[dict], scene: str, method: str) -> tuple[float, bool] | None:
+    """A method's mean seconds per iteration on a scene over its trained points, else (True) over the trainer's
+    estimates in its too-short points; None without either."""
+    own = [r["seconds_per_iteration"] for r in trained(rows, scene, method)]
+    estimated = [
+        r["estimated_seconds_per_iteration"]
+        for r in rows
+        if (r["scene"], r["method"]) == (scene, method) and "estimated_seconds_per_iteration" in r
+    ]
+    values = own or estimated
+    return (sum(values) / len(values), not own) if values else None
+
+
+def speed_cell(rows: Sequence[dict], scene: str, method: str, baseline: str) -> str:
+    """A method's seconds per iteration over the baseline's on a scene; "est." where either is an estimate."""
+    own, base = (seconds_per_iteration(rows, scene, m) for m in (method, baseline))
+    if own is None or base is None:
+        return "—"
+    return f"{own[0] / base[0]:.2f}" + (" (est.)" if own[1] or base[1] else "")
 
 
 def budgets_of(rows: Sequence[dict], scene: str) -> list[str]:
@@ -112,14 +124,14 @@ def speed_table(rows: Sequence[dict], suite: Suite) -> list[str]:
     baseline, paper = suite.equal_time["baseline"], suite.equal_time["paper_time_ratio"]
     scenes = [s for s in suite.equal_time["scenes"] if any(r["scene"] == s for r in rows)]
     lines = [
-        f"Seconds per iteration over {baseline}'s (mean over the budgets that trained), beside the paper's Table 3:",
+        f"Seconds per iteration over {baseline}'s (mean over the budgets that trained; est.: from the trainer's "
+        "estimate where no budget fitted), beside the paper's Table 3:",
         "",
         "| method | " + " | ".join(scenes) + " | paper |",
         "|---|" + "---|" * (len(scenes) + 1),
     ]
     for m in methods_of(rows, suite):
-        ratios = [speed_ratio(rows, s, m, baseline) for s in scenes]
-        cells = ["—" if x is None else f"{x:.2f}" for x in ratios]
+        cells = [speed_cell(rows, s, m, baseline) for s in scenes]
         lines.append(f"| {m} | " + " | ".join(cells) + f" | {paper.get(m, '—')} |")
     return [*lines, ""]
 

@@ -32,7 +32,7 @@ def _row(scene: str, method: str, budget: str, seconds: float, psnr: float, spi:
 def _too_short(scene: str, method: str, budget: str) -> dict:
     row = _row(scene, method, budget, 1.0, 0.0)
     return {k: row[k] for k in ("key", "scene", "method", "budget", "budget_seconds", "threads", "jobs", "machine")} | {
-        "too_short": "--time-budget 1m is too short for this run", "seconds": 40.0
+        "too_short": "--time-budget 1m is too short for this run", "seconds": 40.0,
     }
 
 
@@ -45,6 +45,7 @@ ROWS = [
     _row("lego", "freenerf", "3m", 170.0, 15.0, spi=3.57),
     _row("fern", "tensorf-vm-published", "1m", 58.0, 16.0, spi=0.20),
     _row("fern", "fourierf-vm-paper", "1m", 58.0, 17.5, spi=0.186),
+    _too_short("fern", "freenerf", "1m") | {"estimated_seconds_per_iteration": 8.0},
 ]
 
 
@@ -81,7 +82,8 @@ def fake_runs(monkeypatch: pytest.MonkeyPatch) -> dict:
         log.parent.mkdir(parents=True, exist_ok=True)
         if cmd[0].endswith("fourierf-train"):
             if state["too_short"]:
-                log.write_text("error: --time-budget 1m is too short for this run: 100 iterations need 2m\n")
+                log.write_text("error: --time-budget 1m is too short for this run: 100 iterations, the fewest a "
+                               "budget may pick, need about 2m here (~1.2 s per iteration)\n")  # fmt: skip
                 return 3.0, 0.1, 2
             log.write_text("device cpu (1 thread), grid\n")
             out, key = Path(cmd[cmd.index("--output-dir") + 1]), cmd[cmd.index("--timestamp") + 1]
@@ -112,6 +114,7 @@ def test_a_budget_too_short_is_a_row_that_says_so(fake_runs: dict, tmp_path: Pat
     fake_runs["too_short"] = True
     row = equal_time.execute(equal_time.Point("lego", "freenerf", "1m"), SUITE, tmp_path, tmp_path, tmp_path, 1)
     assert row["too_short"].startswith("--time-budget 1m is too short") and "psnr" not in row
+    assert row["estimated_seconds_per_iteration"] == 1.2
     assert equal_time.too_short(tmp_path / "missing.log") is None
 
 
@@ -140,7 +143,7 @@ def test_the_scene_tables_hold_each_budgets_metrics_and_the_time_to_each_target(
 def test_speed_is_relative_to_the_published_tensorf_beside_the_papers_ratio() -> None:
     lines = rep.speed_table(ROWS, SUITE)
     assert "| fourierf-vm-paper | 0.93 | 0.93 | 0.93 |" in lines
-    assert "| freenerf | 35.70 | — | 35.7 |" in lines  # its too-short point takes no part
+    assert "| freenerf | 35.70 | 40.00 (est.) | 35.7 |" in lines  # trained points win; else the trainer's estimate
     assert "| tensorf-vm-published | 1.00 | 1.00 | 1.0 |" in lines
 
 

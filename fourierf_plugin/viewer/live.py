@@ -109,7 +109,7 @@ class LiveViewer:
     # -- the observer protocol ---------------------------------------------------------------------------------------
     def started(self, pipeline: Pipeline, run_dir: Path, start_step: int) -> None:
         model = render_model(pipeline)
-        progress = TrainingProgress(start_step, start_step)
+        progress = TrainingProgress(start_step, model.max_iters, {}, *pipeline.model.cutoffs(start_step))
         viewed = ViewedRun(model, start_step, run_dir, progress)
         viewed.load_snapshot(snapshot(pipeline.model), start_step)
         datamanager = pipeline.datamanager

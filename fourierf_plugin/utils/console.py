@@ -29,6 +29,7 @@ from rich.progress import (
 from rich.text import Text
 
 from fourierf_plugin.utils.errors import UserError
+from fourierf_plugin.utils.files import write_text_atomic
 
 _CONSOLE: Console | None = None
 _ERR_CONSOLE: Console | None = None
@@ -243,9 +244,5 @@ def append_jsonl(path: Path, record: dict) -> None:
 
 
 def write_json(path: Path, payload: Any) -> None:
-    """Write ``payload`` as indented JSON, atomically (a temp file renamed into place), creating the folder."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(_jsonable(payload), indent=2) + "\n")
-    tmp.replace(path)
+    """Write ``payload`` as indented JSON, atomically (``write_text_atomic``), creating the folder."""
+    write_text_atomic(Path(path), json.dumps(_jsonable(payload), indent=2) + "\n")

@@ -20,6 +20,7 @@ from typing import Any, ClassVar, Literal, TypeVar, Union, get_args, get_origin
 
 from fourierf_plugin import __version__
 from fourierf_plugin.utils.errors import fail
+from fourierf_plugin.utils.files import check_reachable, write_text_atomic
 
 C = TypeVar("C", bound="InstantiateConfig")
 CONFIG_FORMAT = 4
@@ -203,14 +204,13 @@ def from_dict(data: dict[str, Any], expected: type[C] | None = None, registry: R
 def save_config(cfg: Any, path: Path) -> None:
     """Write ``config.json`` atomically (temp file + rename)."""
     payload = {"fourierf_version": __version__, "config_format": CONFIG_FORMAT, "config": to_dict(cfg)}
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(payload, indent=2) + "\n")
-    tmp.replace(path)
+    write_text_atomic(path, json.dumps(payload, indent=2) + "\n")
 
 
 def load_config(path: Path, expected: type[C] | None, registry: Registry) -> C:
     """Read a ``config.json`` whose classes are in ``registry``; every problem becomes one clear :class:`UserError`."""
     path = Path(path)
+    check_reachable(path)
     if path.is_dir():
         path = path / "config.json"
     if not path.is_file():

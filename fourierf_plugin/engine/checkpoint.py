@@ -17,6 +17,8 @@ import torch
 
 from fourierf_plugin.utils.console import warn
 from fourierf_plugin.utils.errors import UserError
+from fourierf_plugin.utils.interrupt import note_kept
+from fourierf_plugin.utils.os_errors import DISK_FULL, disk_full, os_error_in
 
 CHECKPOINT_GLOB = "step-*.ckpt"
 _CHECKPOINT_RE = re.compile(r"^step-(\d+)\.ckpt$")
@@ -42,18 +44,6 @@ def list_checkpoints(directory: Path) -> list[Path]:
         return []
     found = [(step, p) for p in directory.iterdir() if (step := _step_of(p)) is not None and p.is_file()]
     return [p for _, p in sorted(found)]
-
-
-def _io_error_in(err: BaseException) -> OSError | None:
-    """The OSError behind ``err``: torch's zip writer re-raises a failed ``write`` (e.g. ENOSPC) as RuntimeError."""
-    seen: set[int] = set()
-    current: BaseException | None = err
-    while current is not None and id(current) not in seen:
-        if isinstance(current, OSError):
-            return current
-        seen.add(id(current))
-        current = current.__cause__ or current.__context__
-    return None
 
 
 def _fsync_directory(directory: Path) -> None:
@@ -137,13 +127,19 @@ def save_checkpoint(state: dict, directory: Path, step: int, keep_last: int = 3)
         _fsync_directory(directory)
     except BaseException as err:
         _remove_quietly(tmp)
-        io_error = _io_error_in(err)
+        io_error = os_error_in(err)
         if io_error is None or not isinstance(err, Exception):
             raise
+        if io_error.errno in DISK_FULL:
+            earlier = list_checkpoints(directory)
+            kept = f"; the earlier checkpoint {earlier[-1].name} is intact" if earlier else ""
+            resume = f"fourierf-train --load-dir {directory.parent} (after the method's name)"
+            raise disk_full(f"{directory} ({final.name})", resume, kept) from err
         raise UserError(
             f"cannot write checkpoint {final.name} in {directory}: {io_error}",
             fix="free disk space, or choose a writable --output-dir",
         ) from err
+    note_kept(final, "checkpoint")
     _prune(directory, keep_last, final)
     _sweep_stale_temps(directory)
     return final

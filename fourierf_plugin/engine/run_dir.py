@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -17,6 +18,8 @@ from typing import Any
 from fourierf_plugin.data.dataparser_base import DataparserOutputs
 from fourierf_plugin.utils.console import warn
 from fourierf_plugin.utils.errors import UserError
+from fourierf_plugin.utils.interrupt import note_kept
+from fourierf_plugin.utils.os_errors import user_error_for
 
 MAX_NAME_LEN = 100
 _MAX_SUFFIX = 10_000
@@ -59,7 +62,8 @@ def _is_inside(path: Path, root: Path) -> bool:
 
 
 def _unwritable(path: Path, err: OSError) -> UserError:
-    return UserError(f"cannot create the run directory {path}: {err}", fix="choose a writable --output-dir")
+    named = user_error_for(err, ["--output-dir", str(path)], path=path)  # a full disk, a link loop, a long name
+    return named or UserError(f"cannot create the run directory {path}: {err}", fix="choose a writable --output-dir")
 
 
 def make_run_dir(output_dir: Path, scene: str, method: str, timestamp: str | None = None) -> Path:
@@ -81,6 +85,7 @@ def make_run_dir(output_dir: Path, scene: str, method: str, timestamp: str | Non
             continue
         except OSError as err:
             raise _unwritable(candidate, err) from err
+        note_kept(candidate, "run")
         return candidate
     raise UserError(
         f"{_MAX_SUFFIX} runs named {stamp} already exist in {parent}",
@@ -101,18 +106,19 @@ def _pid_in(path: Path) -> int | None:
 
 
 class RunLock:
-    """``RUN/.lock``, held by the one process that trains the run: an advisory ``flock`` the system drops when that
-    process dies, with its PID inside to name it. Why: two trainers on one folder mix their checkpoints and logs."""
+    """A lock file held by this process: an advisory ``flock`` the system drops when the process dies, with its PID
+    inside to name it. ``RUN/.lock`` keeps two trainers off one run (they would mix checkpoints and logs); a lock
+    beside an output keeps two evaluations from writing one report or render folder."""
 
-    def __init__(self, run_dir: Path, fd: int) -> None:
-        self.path = Path(run_dir) / LOCK_NAME
+    def __init__(self, path: Path, fd: int) -> None:
+        self.path = Path(path)
         self._fd: int | None = fd
 
     def release(self) -> None:
-        """Remove the file, then drop the lock (idempotent); the next trainer starts from no file at all."""
+        """Remove the file, then drop the lock (idempotent); the next holder starts from no file at all."""
         if self._fd is None:
             return
-        _HELD.pop(os.path.realpath(self.path.parent), None)
+        _HELD.pop(os.path.realpath(self.path), None)
         with contextlib.suppress(OSError):
             self.path.unlink()
         os.close(self._fd)  # closing drops the flock
@@ -122,23 +128,45 @@ class RunLock:
 def lock_run(run_dir: Path) -> RunLock:
     """Take ``RUN/.lock`` for this process: a run another live process trains is a clear error naming its PID; a
     lock left by a process that no longer runs is taken over with a note."""
-    key = os.path.realpath(run_dir)
+
+    def busy(who: str, pid: int | None) -> UserError:
+        return UserError(
+            f"the run {run_dir} is being trained by {who} (it holds {Path(run_dir) / LOCK_NAME})",
+            fix=f"wait for it to finish, or stop it{f' (kill {pid})' if pid else ''}, then resume",
+        )
+
+    return hold_lock(Path(run_dir) / LOCK_NAME, busy, note_stale=True)
+
+
+def lock_output(target: Path, flag: str) -> RunLock:
+    """Take ``.<name>.lock`` beside ``target`` (an output this process is about to write): another live process
+    writing the same output is a clear error naming its PID, before any work is done."""
+
+    def busy(who: str, pid: int | None) -> UserError:
+        return UserError(
+            f"{flag} {target} is being written by {who} (another evaluation of the run?)",
+            fix=f"wait for it to finish{f' (or stop it: kill {pid})' if pid else ''}, or choose another {flag}",
+        )
+
+    target = Path(target)
+    return hold_lock(target.with_name(f".{target.name}.lock"), busy)
+
+
+def hold_lock(path: Path, busy: Callable[[str, int | None], UserError], note_stale: bool = False) -> RunLock:
+    """Lock ``path`` for this process (creating it, with this PID inside); ``busy(who, pid)`` is raised when a live
+    process holds it. A process holding it already gets its own lock back."""
+    key = os.path.realpath(path)
     if key in _HELD:  # this process holds it already (a trainer made again in the same process)
         return _HELD[key]
-    path = Path(run_dir) / LOCK_NAME
     while True:
         try:
             fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
         except OSError as err:
-            raise UserError(f"cannot create the lock file {path}: {err}", fix="choose a writable run folder") from err
+            raise UserError(f"cannot create the lock file {path}: {err}", fix="choose a writable folder") from err
         if not _try_lock(fd, path):
             os.close(fd)
             pid = _pid_in(path)
-            who = f"process {pid}" if pid is not None else "another process"
-            raise UserError(
-                f"the run {run_dir} is being trained by {who} (it holds {path})",
-                fix=f"wait for it to finish, or stop it{f' (kill {pid})' if pid else ''}, then resume",
-            )
+            raise busy(f"process {pid}" if pid is not None else "another process", pid)
         try:
             same = os.fstat(fd).st_ino == os.stat(path).st_ino
         except FileNotFoundError:
@@ -147,11 +175,11 @@ def lock_run(run_dir: Path) -> RunLock:
             break
         os.close(fd)  # the holder removed the file meanwhile: lock the new one
     previous = _pid_in(path)
-    if previous is not None and previous != os.getpid():
+    if note_stale and previous is not None and previous != os.getpid():
         warn(f"{path} names process {previous}, which no longer runs: this process takes the run over")
     os.ftruncate(fd, 0)
     os.write(fd, f"{os.getpid()}\n".encode())
-    lock = _HELD[key] = RunLock(Path(run_dir), fd)
+    lock = _HELD[key] = RunLock(path, fd)
     return lock
 
 

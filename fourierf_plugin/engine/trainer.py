@@ -97,11 +97,17 @@ STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SI
 """Ctrl-C, and what a job scheduler, ``timeout``, a closed SSH session or a container stop sends."""
 
 
+REPEAT_SECONDS = 1.0
+"""A second stop signal this soon after the first is the same request (a double tap), not an abort."""
+
+
 class _DeferredStop:
-    """The first stop signal asks the loop to stop at the end of the current step (and save); a second one aborts."""
+    """The first stop signal asks the loop to stop at the end of the current step (and save); a second one, a second
+    or more later, aborts."""
 
     def __init__(self) -> None:
         self.signal: int | None = None
+        self._first = 0.0
         self._previous: dict[int, object] = {}
 
     @property
@@ -123,8 +129,11 @@ class _DeferredStop:
 
     def _handle(self, signum, frame) -> None:
         if self.requested:
+            if time.monotonic() - self._first < REPEAT_SECONDS:
+                return  # one key press that sent two signals, or a double tap: still the first request
             raise KeyboardInterrupt
         self.signal = signum
+        self._first = time.monotonic()
 
     def __exit__(self, *exc) -> None:
         for signum, previous in self._previous.items():

@@ -42,6 +42,7 @@ from fourierf_plugin.exporter.frames import NDC_NOTE, MeshFrame, Space, field_fr
 from fourierf_plugin.model_components.rendering import opacity_from_density
 from fourierf_plugin.utils.errors import UserError, fail
 from fourierf_plugin.utils.memory import available_memory, check_fits
+from fourierf_plugin.utils.os_errors import user_error_for
 
 LevelKind = Literal["density", "opacity"]
 Level = Literal["auto"] | float
@@ -362,6 +363,9 @@ def write_mesh(mesh: trimesh.Trimesh, path: Path) -> None:
         mesh.export(str(tmp), file_type=file_type)
         os.replace(tmp, path)
     except OSError as err:
+        problem = user_error_for(err, path=path)
+        if problem is not None:
+            raise problem from err
         raise UserError(f"cannot write the mesh to {path}: {err}", "choose a writable --output-path") from err
     finally:
         tmp.unlink(missing_ok=True)

@@ -11,11 +11,13 @@ import tyro
 from rich.markup import escape
 
 from fourierf_plugin.engine.evaluation import check_render_dir, evaluate
+from fourierf_plugin.engine.run_dir import lock_output
 from fourierf_plugin.scripts.cli import run_cli, strip_verbose
 from fourierf_plugin.scripts.run_options import RunOptions
 from fourierf_plugin.utils.console import get_console, warn, write_json
 from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.utils.files import check_writable_dir, run_renders_dir
+from fourierf_plugin.utils.interrupt import note_kept, stop_cleanly
 from fourierf_plugin.utils.lpips import LPIPS, default_lpips_weights
 
 
@@ -62,16 +64,31 @@ def check_outputs(cfg: EvalConfig) -> None:
 def run_eval(cfg: EvalConfig) -> dict:
     console = get_console()
     check_outputs(cfg)
-    run = cfg.load_run()
-    weights = cfg.lpips_weights or default_lpips_weights()
-    lpips = LPIPS(weights).to(run.device) if weights is not None else None
-    if lpips is None:
-        warn("LPIPS weights not found; LPIPS is skipped (pass --lpips-weights PATH to include it)")
-    render_dir = cfg.render_dir or run_renders_dir(run.run_dir, cfg.split, run.step, cfg.overwrite)
-    report = evaluate(
-        run, cfg.split, lpips, None if skips_renders(render_dir) else render_dir, print_view, cfg.overwrite
-    )
-    write_json(cfg.output_path, report)
+    locks = [lock_output(cfg.output_path, "--output-path")]  # a second evaluation into the same report stops here
+    claimed = None
+    try:
+        run = cfg.load_run()
+        weights = cfg.lpips_weights or default_lpips_weights()
+        lpips = LPIPS(weights).to(run.device) if weights is not None else None
+        if lpips is None:
+            warn("LPIPS weights not found; LPIPS is skipped (pass --lpips-weights PATH to include it)")
+        render_dir = cfg.render_dir
+        if render_dir is None:  # created now, so an evaluation started beside this one takes the next free folder
+            render_dir = run_renders_dir(run.run_dir, cfg.split, run.step, cfg.overwrite, claim=not cfg.overwrite)
+            claimed = None if cfg.overwrite else render_dir
+        renders = None if skips_renders(render_dir) else render_dir
+        if renders is not None:
+            locks.append(lock_output(renders, "--render-dir"))
+        report = evaluate(run, cfg.split, lpips, renders, print_view, cfg.overwrite)
+        if renders is not None:
+            note_kept(renders)
+        write_json(cfg.output_path, report)
+        note_kept(cfg.output_path)
+    finally:
+        if claimed is not None and claimed.is_dir() and not any(claimed.iterdir()):
+            claimed.rmdir()  # claimed by this call and never filled
+        for lock in locks:
+            lock.release()
     results = report["results"]
     summary = f"psnr {results['psnr']:.2f}  ssim {results['ssim']:.4f}"
     if results["lpips"] is not None:
@@ -88,7 +105,7 @@ def main(args: list[str] | None = None) -> dict:
 
 
 def entrypoint() -> None:
-    run_cli(main)
+    run_cli(stop_cleanly(main, "fourierf-eval"))
 
 
 if __name__ == "__main__":

@@ -33,6 +33,7 @@ from fourierf_plugin.scripts.run_options import RunOptions
 from fourierf_plugin.utils.console import get_console
 from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.utils.files import check_writable_dir
+from fourierf_plugin.utils.interrupt import note_kept, stop_cleanly
 
 
 @dataclass
@@ -155,6 +156,7 @@ def run_marching_cubes(cfg: MarchingCubesConfig) -> MeshReport:
         chunk=cfg.chunk,
         frame=frame,
     )
+    note_kept(cfg.output_path)
     for line in describe(report):
         console.print("  " + escape(line), soft_wrap=True)
     return report
@@ -168,7 +170,7 @@ def main(args: list[str] | None = None) -> MeshReport:
 
 
 def entrypoint() -> None:
-    run_cli(main)
+    run_cli(stop_cleanly(main, "fourierf-export"))
 
 
 if __name__ == "__main__":

@@ -53,7 +53,9 @@ from fourierf_plugin.utils.colormaps import Colormap, colorize_accumulation, col
 from fourierf_plugin.utils.console import TaskProgress, format_duration, get_console, warn
 from fourierf_plugin.utils.errors import UserError, fail
 from fourierf_plugin.utils.files import run_renders_dir
+from fourierf_plugin.utils.interrupt import note_kept, stop_cleanly
 from fourierf_plugin.utils.memory import available_memory, check_fits
+from fourierf_plugin.utils.os_errors import user_error_for
 
 OUTPUT_NAMES = ("rgb", "depth", "accumulation")
 
@@ -551,7 +553,13 @@ def render(cfg: RenderConfig) -> RenderResult:
         result = _render_frames(cfg, run, cameras, stems, mode, outputs, staged, output_dir)
         for name in outputs:
             _commit_dir(staged[name], output_dir / name)
+            note_kept(output_dir / name)
             result.frames[name] = [output_dir / name / p.name for p in result.frames[name]]
+    except OSError as err:
+        problem = user_error_for(err, path=output_dir)
+        if problem is None:
+            raise
+        raise problem from err
     finally:
         for folder in staged.values():
             shutil.rmtree(folder, ignore_errors=True)
@@ -620,7 +628,7 @@ def main(args: list[str] | None = None) -> RenderResult:
 
 
 def entrypoint() -> None:
-    run_cli(main)
+    run_cli(stop_cleanly(main, "fourierf-render"))
 
 
 if __name__ == "__main__":

@@ -102,8 +102,9 @@ def test_disk_full_mid_save_keeps_previous_checkpoint(tmp_path: Path, monkeypatc
     with pytest.raises(UserError) as info:
         save_checkpoint(_state(20), tmp_path, step=20)
     assert written and written[0].parent == tmp_path, "the temp file must live in the checkpoint directory"
-    assert str(tmp_path) in info.value.problem and "No space left" in info.value.problem
-    assert "disk space" in (info.value.fix or "") and "--output-dir" in (info.value.fix or "")
+    assert info.value.problem.startswith(f"disk full at {tmp_path}")
+    assert f"the earlier checkpoint {good.name} is intact" in info.value.problem
+    assert "free space" in (info.value.fix or "") and f"--load-dir {tmp_path.parent}" in (info.value.fix or "")
     monkeypatch.undo()
     assert _no_temp_files(tmp_path)
     assert list_checkpoints(tmp_path) == [good]
@@ -148,7 +149,7 @@ def test_real_torch_save_on_full_disk_is_a_user_error(tmp_path: Path, monkeypatc
         return real_open(file, mode, *args, **kwargs)  # type: ignore[call-overload]
 
     monkeypatch.setattr(ckpt, "open", opener, raising=False)
-    with pytest.raises(UserError, match="No space left"):
+    with pytest.raises(UserError, match="disk full at"):
         save_checkpoint(_state(2), tmp_path, step=2)
     monkeypatch.undo()
     assert _no_temp_files(tmp_path)
@@ -164,7 +165,7 @@ def test_runtime_error_wrapping_an_io_error_is_a_user_error(tmp_path: Path, monk
             raise RuntimeError("[enforce fail at inline_container.cc] unexpected pos") from None
 
     monkeypatch.setattr(ckpt.torch, "save", torch_like_save)
-    with pytest.raises(UserError, match="No space left"):
+    with pytest.raises(UserError, match="disk full at"):
         save_checkpoint(_state(1), tmp_path, step=1)
     assert _no_temp_files(tmp_path)
 

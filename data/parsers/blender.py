@@ -100,6 +100,7 @@ def _read_transforms(path: Path) -> _Transforms:
         file_paths.append(frame["file_path"])
         matrices[i] = matrix
     _warn_odd_frames(path, file_paths, matrices)
+    _warn_ignored_intrinsics(path, meta)
     return _Transforms(path, float(angle), file_paths, matrices)
 
 
@@ -114,6 +115,24 @@ def _warn_once(message: str) -> None:
     if message not in _warned:
         _warned.add(message)
         warn(message)
+
+
+INTRINSIC_KEYS = ("fl_x", "fl_y", "cx", "cy", "w", "h")
+"""Per-file intrinsics of nerfstudio-style files, which a Blender scene's camera_angle_x and image centre replace."""
+
+
+def _warn_ignored_intrinsics(path: Path, meta: dict) -> None:
+    """Name the intrinsics keys the file gives and this parser reads past (a cx of 1e9 would otherwise pass
+    unseen); nerfstudio-data reads them."""
+    given = [k for k in INTRINSIC_KEYS if k in meta]
+    given += [f"{k} (per frame)" for k in INTRINSIC_KEYS if any(isinstance(f, dict) and k in f for f in meta["frames"])]
+    if given:
+        values = ", ".join(f"{k} {meta[k]!r:.20}" for k in ("cx", "cy") if k in meta)
+        _warn_once(
+            f"{path} gives {', '.join(given)}{f' ({values})' if values else ''}, which blender-data ignores: it "
+            "takes the focal length from camera_angle_x and the principal point at the image centre; read the "
+            "scene with nerfstudio-data to use them"
+        )
 
 
 def _frames(ids: list[int]) -> str:

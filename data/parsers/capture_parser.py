@@ -44,6 +44,7 @@ from fourierf_plugin.data.parsers.llff import LLFF_DECLARATION
 from fourierf_plugin.data.poses import Orientation
 from fourierf_plugin.data.scene_effects import SceneDeclaration
 from fourierf_plugin.data.view_selection import check_view_counts, explicit_views, kmeans_views, validation_views
+from fourierf_plugin.utils.console import warn
 from fourierf_plugin.utils.errors import fail
 
 SPLIT_KEYS = ("train", "val", "test")
@@ -96,6 +97,28 @@ def check_lenses(cameras: Cameras, names: list[str], source: Path) -> None:
             )
 
 
+_WARNED: set[str] = set()
+
+
+def warn_principal_points(capture: Capture) -> None:
+    """A warning (once per file) naming the frames whose principal point (cx, cy) lies outside their image: a
+    calibration in other units or of another image size, whose rays would all leave the cameras far off-axis."""
+    off = [
+        f
+        for f in capture.frames
+        if not (0 <= f.intrinsics.cx <= f.intrinsics.width and 0 <= f.intrinsics.cy <= f.intrinsics.height)
+    ]
+    if not off or str(capture.source) in _WARNED:
+        return
+    _WARNED.add(str(capture.source))
+    k = off[0].intrinsics
+    more = f" (and {len(off) - 1} more frames)" if len(off) > 1 else ""
+    warn(
+        f"{capture.source}: the principal point of {off[0].image_path.name}{more} lies outside its image (cx {k.cx:g}, "
+        f"cy {k.cy:g} for a {k.width}x{k.height} image); check that cx and cy are in pixels of that image size"
+    )
+
+
 class CaptureParser(DataParser):
     """Base of the capture parsers; ``read_capture`` is the only format-specific part."""
 
@@ -123,6 +146,7 @@ class CaptureParser(DataParser):
                     f"{capture.source} mixes camera models {models}; a scene uses one",
                     "undistort the photos into one model, or split the capture by camera",
                 )
+            warn_principal_points(capture)
             self._capture = capture
         return self._capture
 

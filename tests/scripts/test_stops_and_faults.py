@@ -380,7 +380,7 @@ def test_a_principal_point_far_outside_the_image_is_named(tmp_path: Path, capsys
     NerfstudioDataParserConfig(data=root).setup().get_outputs("train")
     err = " ".join(capsys.readouterr().err.split())
     assert "warning:" in err and str(root / "transforms.json") in err, err
-    assert "principal point of frame 0 and 9 more lies outside its image (cx 1e+09" in err, err
+    assert "principal point of frame_00000.png (and 9 more frames) lies outside its image (cx 1e+09" in err, err
 
 
 def test_intrinsics_a_blender_file_gives_are_named_as_ignored(

@@ -35,10 +35,9 @@ def mean_rays_per_batch(config: Any) -> float:
     )
 
 
-SECONDS_PER_MLP_WEIGHT = 2.5e-10
-"""An MLP field's (freenerf's) training cost per sample and per network weight (a forward and backward pass, the trunk
-again for the colour of the samples that show), 2 threads, measured on the bundled scene before the first occupancy
-update: an estimate, not a promise."""
+SECONDS_PER_MLP_WEIGHT = 1.2e-10
+"""An MLP field's (freenerf's) training cost per sample and per network weight (a forward and backward pass), 2 threads,
+measured on the bundled scene before the first occupancy update: an estimate, not a promise."""
 
 
 def mlp_seconds_per_iteration(config: Any, rays: float) -> float:

@@ -82,6 +82,8 @@ class MLPField(PreparedField):
         self.register_buffer("encoding_box", aabb.detach().clone().float())
         self.register_buffer("reso", torch.tensor([int(r) for r in reso], dtype=torch.long))
         self.view_dependent = view_dependent
+        self.recording = False
+        self.recorded: Tensor | None = None
         self.noise_generator = noise_generator
         point_width = encoded_width(3, config.position_bands)
         self.direction_width = encoded_width(3, config.direction_bands) if view_dependent else 0
@@ -126,8 +128,12 @@ class MLPField(PreparedField):
         return x
 
     def density(self, xyz: Tensor) -> Tensor:
-        """σ ≥ 0 at world points [N, 3] -> [N]."""
-        raw = self.density_head(self.trunk_features(xyz)).squeeze(-1)
+        """σ ≥ 0 at world points [N, 3] -> [N]; while ``recording``, the trunk's output is kept in ``recorded`` for
+        the colour of the same points (one pass through the trunk per sample, as NeRF's)."""
+        trunk = self.trunk_features(xyz)
+        if self.recording:
+            self.recorded = trunk
+        raw = self.density_head(trunk).squeeze(-1)
         if self.training and self.config.density_noise > 0:
             noise = torch.randn(raw.shape, generator=self.noise_generator, device=raw.device, dtype=raw.dtype)
             raw = raw + self.config.density_noise * noise
@@ -135,7 +141,11 @@ class MLPField(PreparedField):
 
     def rgb(self, xyz: Tensor, directions: Tensor | None) -> Tensor:
         """Colour in [0, 1] (padded) at world points [N, 3]; ``directions`` unit [N, 3], read when view-dependent."""
-        x = self.bottleneck(self.trunk_features(xyz))
+        return self.rgb_from_trunk(self.trunk_features(xyz), directions)
+
+    def rgb_from_trunk(self, trunk: Tensor, directions: Tensor | None) -> Tensor:
+        """Colour from the trunk's output [N, width] at the points (``rgb`` without the trunk)."""
+        x = self.bottleneck(trunk)
         if self.view_dependent:
             if directions is None:
                 raise ValueError("a view-dependent MLP field needs the view directions")

@@ -270,9 +270,7 @@ class FourieRFModel(nn.Module):
         with phase("appearance"):
             rgb = weights.new_zeros(weights.shape[0], 3)
             if colour:
-                rgb = shade(
-                    self.field.rgb, samples, weights, self.config.weight_threshold, self.effects.view_dependent, scale
-                )
+                rgb = self.colours(samples, weights, scale)
         with phase("compositing"):
             acc = weights.sum(dim=-1)
             rgb = blend_background(rgb, acc, background)
@@ -290,6 +288,11 @@ class FourieRFModel(nn.Module):
                     if term is not None:
                         out[regulariser.name] = term
         return out
+
+    def colours(self, samples: RaySamples, weights: Tensor, scale: Tensor | None) -> Tensor:
+        """Ray colours [R, 3] from the samples that show (``marching.shade``; a model whose density pass already
+        computed what the colour reads may reuse it)."""
+        return shade(self.field.rgb, samples, weights, self.config.weight_threshold, self.effects.view_dependent, scale)
 
     def _gradient_scale(self, t: Tensor) -> Tensor | None:
         """The product of this step's gradient scales at ray parameters ``t`` [R, N]; None where none acts."""

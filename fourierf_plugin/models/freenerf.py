@@ -4,7 +4,8 @@ visible bands open linearly over FreeNeRF's share of the run, with FreeNeRF's oc
 Sampling is this pipeline's, not FreeNeRF's coarse and fine networks: jittered steps of ``step_ratio`` voxels of the
 occupancy grid through the scene's box (even steps of NDC depth on a forward-facing scene), with the occupancy grid
 skipping empty space from its first update on. One network instead of two halves the parameters and the cost per
-sample, and the occupancy grid replaces the fine pass's job of putting samples where the density is.
+sample, and the occupancy grid replaces the fine pass's job of putting samples where the density is. In CPU training
+the colour reads the trunk's output of the density pass, so each sample goes through the trunk once, as in NeRF.
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ from fourierf_plugin.field_components import schedules
 from fourierf_plugin.field_components.frequency_mask import visible_share
 from fourierf_plugin.fields.mlp_field import MLPField, MLPFieldConfig
 from fourierf_plugin.fields.prepared_field import PreparedField
+from fourierf_plugin.model_components.marching import occupied, shade
+from fourierf_plugin.model_components.ray_sampling import RaySamples
 from fourierf_plugin.models.fourierf import FourierConfig, FourieRFModel, FourieRFModelConfig
 
 
@@ -34,6 +37,37 @@ class FreeNeRFModel(FourieRFModel):
         size = (scene_box[1] - scene_box[0]).tolist()
         reso = schedules.n_to_reso(self.config.field.n_voxels_init, size)
         return MLPField(self.config.mlp, scene_box, reso, effects.view_dependent, generator, self.step_generator)
+
+    def march(self, samples: RaySamples) -> Tensor:
+        """σ [R, N] as any model marches; in CPU training the trunk's output at the occupied samples is kept for
+        ``colours`` (the sampler's other paths evaluate the trunk again for the colour)."""
+        field: MLPField = self.field  # type: ignore[assignment]
+        field.recorded = None
+        field.recording = self.training and not self.gpu_paths and self.config.cull_weight_threshold <= 0
+        try:
+            return super().march(samples)
+        finally:
+            field.recording = False
+
+    def colours(self, samples: RaySamples, weights: Tensor, scale: Tensor | None) -> Tensor:
+        """Ray colours from the trunk's output ``march`` kept (the samples that show are among the occupied ones it
+        evaluated, in the same order), else as any model."""
+        field: MLPField = self.field  # type: ignore[assignment]
+        trunk, field.recorded = field.recorded, None
+        if trunk is None:
+            return super().colours(samples, weights, scale)
+        points = samples.points.view(-1, 3)
+        evaluated, _ = occupied(points, samples.inside.view(-1).nonzero().squeeze(1), self.occupancy)
+        threshold = self.config.weight_threshold
+        shown = (weights.detach().view(-1) > threshold).nonzero().squeeze(1)
+        rows = torch.searchsorted(evaluated, shown).clamp(max=max(0, evaluated.numel() - 1))
+        if evaluated.numel() == 0 or not torch.equal(evaluated.index_select(0, rows), shown):
+            return super().colours(samples, weights, scale)
+
+        def colour(_points: Tensor, directions: Tensor | None) -> Tensor:
+            return field.rgb_from_trunk(trunk.index_select(0, rows), directions)
+
+        return shade(colour, samples, weights, threshold, self.effects.view_dependent, scale)
 
     def cutoffs(self, step: int) -> tuple[float, float]:
         """The share of the encoding's bands visible at ``step`` (positions and directions alike): FreeNeRF's t / T."""

@@ -6,6 +6,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import types
 from dataclasses import replace
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from fourierf_plugin.field_components.frequency_mask import band_mask, encode, e
 from fourierf_plugin.fields.mlp_field import MLPField, MLPFieldConfig, parameter_count
 from fourierf_plugin.method_configs import all_methods
 from fourierf_plugin.method_configs.budget import Run, rules_for
+from fourierf_plugin.models.fourierf import FourieRFModel
 from fourierf_plugin.models.freenerf import FreeNeRFModelConfig
 from fourierf_plugin.scripts.eval import EvalConfig, run_eval
 from fourierf_plugin.scripts.train import build_config, parse_args
@@ -114,6 +116,32 @@ def test_the_hidden_bands_reach_no_output() -> None:
     assert first[:, 3:].abs().sum() == 0, "the masked bands are not"
 
 
+def test_the_colour_reuses_the_density_pass_with_the_same_numbers_and_gradients() -> None:
+    """In training the colour reads the trunk's output of the density pass; evaluating the trunk again gives the same
+    colours and the same gradients (and counting the trunk's calls shows the pass is reused)."""
+    results = []
+    for reuse in (True, False):
+        model = _model(100)
+        model.train()
+        if not reuse:
+            model.colours = types.MethodType(FourieRFModel.colours, model)
+        calls = []
+        model.field.trunk[0].register_forward_hook(lambda *_, seen=calls: seen.append(1))
+        model.prepare(50)
+        origins = torch.tensor([[0.0, -4.0, 0.3]]).repeat(16, 1)
+        directions = torch.nn.functional.normalize(
+            torch.randn(16, 3, generator=torch.Generator().manual_seed(1)) * 0.1 + torch.tensor([0.0, 1.0, 0.0]), dim=-1
+        )
+        out = model(origins, directions, jitter=torch.Generator().manual_seed(2))
+        out["rgb"].sum().backward()
+        results.append((out["rgb"].detach(), model.field.trunk[0].weight.grad.clone(), len(calls)))
+    (rgb_a, grad_a, calls_a), (rgb_b, grad_b, calls_b) = results
+    torch.testing.assert_close(rgb_a, rgb_b)
+    torch.testing.assert_close(grad_a, grad_b)
+    assert (calls_a, calls_b) == (1, 2)
+    assert grad_a.abs().sum() > 0 and (rgb_a < 0.999).any(), "the rays hit the field's fog"
+
+
 def test_parameter_count_matches_the_network() -> None:
     config = MLPFieldConfig()
     field = MLPField(config, torch.tensor([[-1.0] * 3, [1.0] * 3]), [4, 4, 4], True, torch.Generator().manual_seed(0))
@@ -150,7 +178,8 @@ def test_the_cost_estimate_counts_the_network_per_sample() -> None:
     wide = copy.deepcopy(config)
     wide.pipeline.model.mlp.width = 512
     assert estimate_seconds(wide, 2) > 3 * estimate_seconds(config, 2) > 0
-    assert estimate_seconds(config, 2) > 10 * estimate_seconds(replace(all_methods["fourierf-vm"]), 2)
+    grid = replace(all_methods["fourierf-vm"], max_num_iterations=800)
+    assert estimate_seconds(config, 2) > 10 * estimate_seconds(grid, 2), "an MLP per sample costs more than lookups"
     weights = parameter_count(config.pipeline.model.mlp)
     assert checkpoint_bytes(config, 0) == pytest.approx(weights * 12 + 1e6)
 

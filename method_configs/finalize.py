@@ -15,7 +15,7 @@ from fourierf_plugin.data.parsers.capture_parser import CaptureParserConfig
 from fourierf_plugin.data.scene_effects import EffectsConfig
 from fourierf_plugin.engine.loading import check_same_scene, locate_data
 from fourierf_plugin.engine.machine import pick_device
-from fourierf_plugin.engine.option_checks import check_saved_config, ignored_band_flags
+from fourierf_plugin.engine.option_checks import check_mlp_flags, check_saved_config, ignored_band_flags
 from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.method_configs.budget import apply_budget_rule
 from fourierf_plugin.method_configs.registry import all_methods
@@ -37,6 +37,7 @@ def finalize(config: TrainerConfig, given: frozenset[str] = frozenset()) -> tupl
     and the notes that say what was decided and why (for the caller to print). ``given``: the config paths of the
     flags the user typed (``given_options``), which no preset, sizing or rule overrides."""
     config = copy.deepcopy(config)
+    check_mlp_flags(config, given)
     ignored = ignored_band_flags(config, given)
     if ignored:
         warn(

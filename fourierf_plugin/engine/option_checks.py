@@ -241,6 +241,33 @@ def check_mlp_options(config: Any) -> None:
         )
 
 
+MLP_SAMPLING_OPTIONS = ("n_voxels_init", "n_voxels_final", "upsample_fractions")
+"""The ``field`` options an MLP field reads: the size and schedule of the grid the sampler and occupancy grid use."""
+MLP_IGNORED = ("optimizer.lr_grids", "optimizer.lr_generator", "optimizer.generator_grad_clip")
+"""Optimiser options of parameter groups an MLP field does not have (its one group is ``networks``)."""
+
+
+def check_mlp_flags(config: Any, given: frozenset[str]) -> None:
+    """One UserError naming every typed flag (``given``: config paths) that nothing reads in an MLP field's run: the
+    factor grids' components, decoder and activation, the grids' curriculum, the grids' learning rates."""
+    if mlp_config(config.pipeline.model) is None:
+        return
+    field, fourier = f"{_MODEL}.field.", f"{_MODEL}.fourier."
+    unread = sorted(
+        path
+        for path in given
+        if (path.startswith(field) and path[len(field) :] not in MLP_SAMPLING_OPTIONS)
+        or path.startswith(fourier)
+        or path in MLP_IGNORED
+    )
+    if unread:
+        flags = " ".join(flag_of(path) for path in unread)
+        fail(
+            f"{flags}: read by factor grids only; freenerf's field is an MLP ({flag_of(_MLP)}.*), which ignores them",
+            f"drop {flags}; the MLP's own options are under {flag_of(_MLP)} and its lr is --optimizer.lr-networks",
+        )
+
+
 def check_final_cutoff(fourier: Any) -> None:
     """The band only opens: an initial cutoff above the final one is a contradiction, not a schedule."""
     own_color_final = fourier.f_final_color is not None

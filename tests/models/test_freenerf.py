@@ -23,7 +23,7 @@ from fourierf_plugin.method_configs.budget import Run, rules_for
 from fourierf_plugin.models.fourierf import FourieRFModel
 from fourierf_plugin.models.freenerf import FreeNeRFModelConfig
 from fourierf_plugin.scripts.eval import EvalConfig, run_eval
-from fourierf_plugin.scripts.train import build_config, parse_args
+from fourierf_plugin.scripts.train import build_config, given_options, parse_args
 from fourierf_plugin.utils.errors import UserError
 from fourierf_plugin.viewer.render_service import (
     PreviewQuality,
@@ -39,6 +39,7 @@ from tests.helpers import (
     assert_same_model_state,
     evaluate_render_and_export,
     resumed_and_uninterrupted,
+    tiny_args,
     tiny_trainer_config,
     train_tiny,
 )
@@ -195,11 +196,15 @@ def test_the_cost_estimate_counts_the_network_per_sample() -> None:
         (["--pipeline.model.fourier.enabled", "True"], "--pipeline.model.fourier.enabled"),
         (["--optimizer.grad-clip-norm", "-0.1"], "--optimizer.grad-clip-norm"),
         (["--optimizer.lr-warmup-fraction", "2"], "--optimizer.lr-warmup-fraction"),
+        (["--pipeline.model.field.density-components", "4", "4", "4"], "--pipeline.model.field.density-components"),
+        (["--optimizer.lr-grids", "0.1"], "--optimizer.lr-grids"),
+        (["--pipeline.model.fourier.f0-density", "0.1"], "--pipeline.model.fourier.f0-density"),
     ],
 )
 def test_a_bad_option_is_one_clear_error_naming_its_flag(tmp_path: Path, flags: list[str], named: str) -> None:
+    args = tiny_args(tmp_path, "freenerf", 20, flags)
     with pytest.raises(UserError) as info:
-        tiny_trainer_config(tmp_path, "freenerf", iters=20, extra=flags)
+        build_config(parse_args(args), given_options(args))
     assert named in info.value.problem and info.value.fix
 
 

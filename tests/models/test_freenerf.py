@@ -6,6 +6,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import subprocess
 import types
 from dataclasses import replace
 from pathlib import Path
@@ -22,6 +23,8 @@ from fourierf_plugin.method_configs import all_methods
 from fourierf_plugin.method_configs.budget import Run, rules_for
 from fourierf_plugin.models.fourierf import FourieRFModel
 from fourierf_plugin.models.freenerf import FreeNeRFModelConfig
+from fourierf_plugin.scripts import train as train_script
+from fourierf_plugin.scripts.cli import EXIT_USER_ERROR
 from fourierf_plugin.scripts.eval import EvalConfig, run_eval
 from fourierf_plugin.scripts.train import build_config, given_options, parse_args
 from fourierf_plugin.utils.errors import UserError
@@ -37,11 +40,13 @@ from tests.helpers import (
     TINY_FLAGS,
     TINY_INIT_RESO,
     assert_same_model_state,
+    cli_exit_code,
     evaluate_render_and_export,
     resumed_and_uninterrupted,
     tiny_args,
     tiny_trainer_config,
     train_tiny,
+    venv_script,
 )
 
 SMALL_MLP = [
@@ -275,3 +280,29 @@ def test_a_forward_facing_scene_takes_freenerfs_llff_values_and_trains_in_ndc(tm
         EvalConfig(load_config=run_dir / "config.json", output_path=tmp_path / "eval.json", render_dir=Path("none"))
     )
     assert 3.0 < report["results"]["psnr"] < 60.0
+
+
+@pytest.mark.slow
+def test_the_installed_commands_train_and_evaluate_a_freenerf_run(tmp_path: Path) -> None:
+    """``fourierf-train freenerf`` for a few iterations, then ``fourierf-eval`` on its config, as a user runs them."""
+    train = subprocess.run(
+        [str(venv_script("fourierf-train")), *tiny_args(tmp_path, "freenerf", 6, [*SMALL_MLP, "--threads", "1"])],
+        capture_output=True, text=True, timeout=600, check=False,
+    )  # fmt: skip
+    assert train.returncode == 0, train.stdout + train.stderr
+    (config_path,) = tmp_path.rglob("config.json")
+    report = tmp_path / "eval.json"
+    evaluate = subprocess.run(
+        [str(venv_script("fourierf-eval")), "--load-config", str(config_path), "--output-path", str(report),
+         "--render-dir", "none", "--threads", "1"],
+        capture_output=True, text=True, timeout=600, check=False,
+    )  # fmt: skip
+    assert evaluate.returncode == 0, evaluate.stdout + evaluate.stderr
+    saved = json.loads(report.read_text())
+    assert saved["method_name"] == "freenerf" and saved["step"] == 6 and math.isfinite(saved["results"]["psnr"])
+
+
+def test_the_cli_refuses_a_bad_option_with_exit_2_and_writes_nothing(tmp_path: Path) -> None:
+    args = tiny_args(tmp_path, "freenerf", 2, ["--pipeline.model.mlp.ramp-fraction", "-0.5"])
+    assert cli_exit_code(train_script.main, args) == EXIT_USER_ERROR
+    assert not list(tmp_path.rglob("config.json")), "nothing was written"

@@ -17,8 +17,7 @@ import torch
 from fourierf_plugin.engine.estimates import checkpoint_bytes, estimate_seconds
 from fourierf_plugin.engine.optimizers import OptimizerConfig, warmup_scale
 from fourierf_plugin.engine.trainer import Trainer
-from fourierf_plugin.field_components.frequency_mask import band_mask, encode, encoded_width
-from fourierf_plugin.fields.mlp_field import MLPField, MLPFieldConfig, parameter_count
+from fourierf_plugin.fields.mlp_field import MLPFieldConfig, parameter_count
 from fourierf_plugin.method_configs import all_methods
 from fourierf_plugin.method_configs.budget import Run, rules_for
 from fourierf_plugin.models.fourierf import FourieRFModel
@@ -92,36 +91,6 @@ def test_the_mask_opens_linearly_over_90_percent_of_the_run(step: int, positions
     assert got_directions == pytest.approx(directions, abs=1e-6)
 
 
-def test_the_encoding_keeps_the_raw_input_and_masks_sine_and_cosine_together() -> None:
-    x = torch.tensor([[0.25, -0.5, 0.1]])
-    mask = torch.tensor([1.0, 0.5, 0.0])
-    want = [0.25, -0.5, 0.1]
-    for k, weight in enumerate(mask.tolist()):
-        angles = [math.pi * 2**k * v for v in (0.25, -0.5, 0.1)]
-        want += [weight * math.sin(a) for a in angles] + [weight * math.cos(a) for a in angles]
-    got = encode(x, mask)
-    assert got.shape[-1] == encoded_width(3, 3) == len(want)
-    assert got[0].tolist() == pytest.approx(want, abs=1e-6)
-
-
-def test_a_share_outside_zero_to_one_is_refused() -> None:
-    with pytest.raises(ValueError, match="visible share"):
-        band_mask(1.5, 4)
-
-
-def test_the_hidden_bands_reach_no_output() -> None:
-    """With no band visible, the field is a function of the raw position only: points that differ only in a
-    high-frequency component of the encoding give the same density (no gradient reaches the masked bands' weights)."""
-    model = _model(100)
-    model.prepare(0)
-    xyz = torch.rand(64, 3) * 2 - 1
-    sigma = model.field.density(xyz).sum()
-    sigma.backward()
-    first = model.field.trunk[0].weight.grad
-    assert first[:, :3].abs().sum() > 0, "the raw input is trained"
-    assert first[:, 3:].abs().sum() == 0, "the masked bands are not"
-
-
 def test_the_colour_reuses_the_density_pass_with_the_same_numbers_and_gradients() -> None:
     """In training the colour reads the trunk's output of the density pass; evaluating the trunk again gives the same
     colours and the same gradients (and counting the trunk's calls shows the pass is reused)."""
@@ -146,12 +115,6 @@ def test_the_colour_reuses_the_density_pass_with_the_same_numbers_and_gradients(
     torch.testing.assert_close(grad_a, grad_b)
     assert (calls_a, calls_b) == (1, 2)
     assert grad_a.abs().sum() > 0 and (rgb_a < 0.999).any(), "the rays hit the field's fog"
-
-
-def test_parameter_count_matches_the_network() -> None:
-    config = MLPFieldConfig()
-    field = MLPField(config, torch.tensor([[-1.0] * 3, [1.0] * 3]), [4, 4, 4], True, torch.Generator().manual_seed(0))
-    assert sum(p.numel() for p in field.parameters()) == parameter_count(config)
 
 
 def test_warmup_rises_from_its_start_to_one() -> None:

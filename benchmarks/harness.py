@@ -1,13 +1,9 @@
-"""What the scripts in ``benchmarks/`` share: timed child processes, results files, BENCHMARKS.md sections, and
-the suite (``suite.toml``) with the setting names it is written in.
-
-Each run is its own process (`fourierf-train`, then `fourierf-eval`), timed by wall clock with its peak RSS read
-from the child's rusage. Results are appended to a JSONL file (finished runs are skipped on a re-run; delete a line
-to re-time it) and a section of BENCHMARKS.md between markers is regenerated from them.
-"""
+"""What the scripts in ``benchmarks/`` share: child processes timed, JSONL results, BENCHMARKS.md sections, and the
+suite (``suite.toml``) with the setting names it is written in."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
@@ -16,7 +12,7 @@ import shutil
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,6 +23,7 @@ from fourierf_plugin.utils.console import CPU_THREADS_NOTE
 
 BIN = Path(sys.executable).parent
 REPO = Path(__file__).resolve().parents[1]
+TRAIN, EVAL = (str(BIN / "fourierf-train"),), (str(BIN / "fourierf-eval"),)
 LEGO_VIEWS = ("27", "76", "97", "99")
 PCPU_LEGO_PARSER = ["blender-data", "--downscale", "4", "--test-every", "8", "--view-ids", *LEGO_VIEWS]
 """P-CPU's lego: 4 views at 100×100, every 8th test view."""
@@ -40,6 +37,16 @@ GRID_FLAGS = [
 ]  # fmt: skip
 
 
+def arguments(doc: str | None, work: str | None) -> argparse.ArgumentParser:
+    """A script's parser with the options every script has: ``--shared``, ``--work`` (under outputs/) and
+    ``--markdown`` ('none' writes no section)."""
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--shared", type=Path, default=REPO.parent / "shared")
+    ap.add_argument("--work", type=Path, default=None if work is None else REPO / "outputs" / work)
+    ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md", help="'none' writes no section")
+    return ap
+
+
 def run_timed(cmd: Sequence[str], log: Path, env: dict[str, str] | None = None) -> tuple[float, float, int]:
     """Wall seconds, peak RSS (GB, the child's rusage) and exit code of one child process, its output to ``log``."""
     log.parent.mkdir(parents=True, exist_ok=True)
@@ -50,6 +57,39 @@ def run_timed(cmd: Sequence[str], log: Path, env: dict[str, str] | None = None) 
         proc = subprocess.Popen(list(map(str, cmd)), stdout=fh, stderr=subprocess.STDOUT, env=env)
         _, status, usage = os.wait4(proc.pid, 0)
     return time.perf_counter() - start, usage.ru_maxrss / 1024**2, os.waitstatus_to_exitcode(status)
+
+
+def run_checked(cmd: Sequence[str], log: Path, what: str, env: dict[str, str] | None = None) -> tuple[float, float]:
+    """``run_timed``, raising when the child failed: its wall seconds and peak RSS (GB)."""
+    seconds, rss, code = run_timed(cmd, log, env)
+    if code != 0:
+        raise RuntimeError(f"{what} failed ({code}); see {log}")
+    return seconds, rss
+
+
+def train_cmd(method: str, data: Path, out: Path, stamp: str, *flags: str, program: Sequence[str] = TRAIN) -> list:
+    """A ``fourierf-train`` command writing ``out/<scene>/<method>/<stamp>``; later flags win, the parser's last."""
+    return [*program, method, "--data", str(data), "--output-dir", str(out), "--timestamp", stamp, *flags]
+
+
+def eval_cmd(run_dir: Path, report: Path, *flags: str, program: Sequence[str] = EVAL) -> list:
+    """A ``fourierf-eval`` command of a run, its report to ``report`` (overwritten)."""
+    return [*program, "--load-config", str(run_dir / "config.json"), "--output-path", str(report), "--overwrite",
+            *flags]  # fmt: skip
+
+
+def run_dir_in(out: Path, method: str, stamp: str) -> Path:
+    """The folder ``train_cmd`` wrote under ``out`` (the trainer names the scene folder after the data)."""
+    return next(out.glob(f"*/{method}/{stamp}"))
+
+
+def read_jsonl(path: Path) -> list[dict]:
+    """The rows of a JSONL file (none if it is missing; blank lines skipped)."""
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()] if path.exists() else []
+
+
+def write_jsonl(path: Path, rows: Iterable[dict]) -> None:
+    path.write_text("".join(json.dumps(row) + "\n" for row in rows))
 
 
 def read_metrics(path: Path) -> list[dict]:
@@ -75,6 +115,11 @@ def done_record(records: list[dict]) -> dict | None:
 def elapsed_by_step(records: list[dict]) -> dict[int, float]:
     """Training seconds since the start of the run at every logged step."""
     return {int(r["step"]): float(r["elapsed_s"]) for r in log_records(records) if "elapsed_s" in r}
+
+
+def seconds_per_iteration(elapsed: dict[int, float], first: int, last: int) -> float:
+    """Training seconds per iteration from logged step ``first`` to ``last``."""
+    return (elapsed[last] - elapsed[first]) / (last - first)
 
 
 @dataclass(frozen=True)
@@ -105,16 +150,14 @@ def train_and_eval(
     threads: int | None = None,
 ) -> dict:
     """Train one run, evaluate it on the test split, and return its result row. ``threads`` caps torch's CPU threads
-    in both steps, so that jobs run side by side do not oversubscribe the cores during evaluation either."""
+    in both steps, so that jobs side by side do not oversubscribe the cores."""
     out_dir = work / "runs"
-    # The harness owns its work folder: a run interrupted earlier left its directory (under the scene folder the
-    # trainer names after the data) without a result, and a new run would otherwise go to "<key>-1".
+    # A run interrupted earlier left its directory without a result; a new run would otherwise go to "<key>-1".
     for earlier in [*out_dir.glob(f"*/{run.method}/{run.key}"), *out_dir.glob(f"*/{run.method}/{run.key}-1")]:
         shutil.rmtree(earlier, ignore_errors=True)
     train_log = work / f"{run.key}.train.log"
-    train_s, train_rss, code = run_timed(train_command(run, data, out_dir, parser_args, extra, threads), train_log)
-    if code != 0:
-        raise RuntimeError(f"training failed ({code}); see {train_log}")
+    cmd = train_command(run, data, out_dir, parser_args, extra, threads)
+    train_s, train_rss = run_checked(cmd, train_log, "training")
     run_dir = next(out_dir.glob(f"*/{run.method}/{run.key}"), out_dir / scene / run.method / run.key)
     views = json.loads((run_dir / "views.json").read_text())
     row = {
@@ -130,15 +173,13 @@ def train_command(
     run: Run, data: Path, out: Path, parser_args: Sequence[str], extra: Sequence[str] = (), threads: int | None = None
 ) -> list[str]:
     """The ``fourierf-train`` command of one run: its sizes, then ``extra`` (later flags win), the parser last."""
-    return [
-        str(BIN / "fourierf-train"), run.method, "--data", str(data), "--output-dir", str(out),
-        "--timestamp", run.key, "--seed", str(run.seed), *run.sizes(), *extra, *thread_flags(threads), *parser_args,
-    ]  # fmt: skip
+    flags = ["--seed", str(run.seed), *run.sizes(), *extra, *thread_flags(threads), *parser_args]
+    return train_cmd(run.method, data, out, run.key, *flags)
 
 
 def threads_used(train_log: Path) -> int | None:
     """The CPU thread count the trainer reported in its log (None: not found). One thread is reproducible, more are
-    not: parallel kernels sum floats in a varying order, which training amplifies, so a rerun must know it."""
+    not (parallel kernels sum floats in a varying order), so a rerun must know it."""
     try:
         found = CPU_THREADS_NOTE.search(train_log.read_text(errors="replace"))
     except OSError:
@@ -147,9 +188,8 @@ def threads_used(train_log: Path) -> int | None:
 
 
 def revived_batches(metrics: Path) -> int | None:
-    """Batches on which the run revived a dead density field, from its last logged step (None: its field cannot
-    revive, or the log predates the count). Where it is 0 the run is TensoRF's ReLU to the bit, so two settings that
-    differ only in when they revive trained the same run."""
+    """Batches on which the run revived a dead density field, at its last logged step (None: its field cannot
+    revive). Where it is 0 the run is TensoRF's ReLU to the bit."""
     counts = [r["revived_batches"] for r in log_records(read_metrics(metrics)) if "revived_batches" in r]
     return int(counts[-1]) if counts else None
 
@@ -169,21 +209,14 @@ def evaluate(
     threads: int | None = None,
 ) -> dict:
     """Evaluate a trained run on one split, at its latest checkpoint or ``checkpoint``: metrics and timings for its
-    result row (val keys prefixed ``val_``)."""
+    result row (other splits' keys prefixed with the split)."""
     tag = "" if split == "test" else f".{split}"
     eval_json = work / f"{key}{tag}.eval.json"
-    eval_cmd = [
-        str(BIN / "fourierf-eval"), "--load-config", str(run_dir / "config.json"), "--output-path", str(eval_json),
-        "--lpips-weights", str(lpips), "--split", split, "--overwrite",
-        *(["--checkpoint", str(checkpoint)] if checkpoint is not None else []), *thread_flags(threads),
-    ]  # fmt: skip
-    eval_s, _, code = run_timed(eval_cmd, work / f"{key}{tag}.eval.log")
-    if code != 0:
-        raise RuntimeError(f"evaluation failed ({code}); see {work / f'{key}{tag}.eval.log'}")
+    flags = ["--lpips-weights", str(lpips), "--split", split, *thread_flags(threads)]
+    flags += ["--checkpoint", str(checkpoint)] if checkpoint is not None else []
+    eval_s, _ = run_checked(eval_cmd(run_dir, eval_json, *flags), work / f"{key}{tag}.eval.log", "evaluation")
     report = json.loads(eval_json.read_text())
-    metrics = {
-        "psnr": report["results"]["psnr"], "ssim": report["results"]["ssim"], "lpips": report["results"]["lpips"],
-    }  # fmt: skip
+    metrics = {k: report["results"][k] for k in ("psnr", "ssim", "lpips")}
     if split != "test":
         return {f"{split}_{k}": v for k, v in metrics.items()} | {f"{split}_view_ids": report.get("view_ids")}
     return metrics | {
@@ -195,7 +228,7 @@ def evaluate(
 def save_results(path: Path, results: dict[str, dict]) -> None:
     """Rewrite the results file atomically (after rows were updated in place)."""
     tmp = path.with_suffix(".tmp")
-    tmp.write_text("".join(json.dumps(row) + "\n" for row in results.values()))
+    write_jsonl(tmp, results.values())
     tmp.replace(path)
 
 
@@ -217,9 +250,7 @@ def run_plan(plan: Sequence[Run], results_path: Path, execute: Callable[[Run], d
 
 
 def load_results(path: Path) -> dict[str, dict]:
-    if not path.exists():
-        return {}
-    return {r["key"]: r for r in map(json.loads, path.read_text().splitlines()) if r}
+    return {r["key"]: r for r in read_jsonl(path)}
 
 
 def fmt(values: list[float], digits: int) -> str:
@@ -247,9 +278,16 @@ def update_benchmarks_md(path: Path, begin: str, end: str, body: list[str]) -> s
     return section
 
 
+def write_section(markdown: Path, name: str, script: str, body: list[str]) -> None:
+    """Print a script's section and write it into ``markdown`` between its markers (not where that is 'none')."""
+    print("\n".join(body))
+    if str(markdown).lower() != "none":
+        update_benchmarks_md(markdown, *markers(name, script), body)
+
+
 def section_head(title: str, command: str, settings: str | None = None, machine: str | None = None) -> list[str]:
     """The opening lines every BENCHMARKS.md section shares: title, machine and command, what was run. ``machine``
-    replaces this machine's description where the rows were recorded elsewhere (on several machines)."""
+    replaces this machine's description where the rows were recorded elsewhere."""
     return [
         f"## {title}",
         "",
@@ -428,9 +466,7 @@ def point_run(method: str, protocol: Protocol, setting: str, seed: int) -> Run:
 
 def read_repeats(path: Path) -> list[dict]:
     """Every row of ``repeats.jsonl``: unlike the results, a key may hold several (one a rerun)."""
-    if not path.exists():
-        return []
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    return read_jsonl(path)
 
 
 def rows_by(results: dict[str, dict], scene: str, protocol: str, method: str) -> dict[str, list[dict]]:
@@ -450,10 +486,8 @@ def val_by_seed(rows: list[dict], seeds: Sequence[int]) -> dict[int, float]:
 
 def chosen_setting(groups: dict[str, list[dict]], seeds: Sequence[int]) -> str | None:
     """The setting with the best mean validation PSNR over ``seeds`` among those run on every seed (the seeds stage
-    runs the sweep's leaders), else the best validation PSNR of the first seed (the sweep's seed).
-
-    Why the mean where there is one: one seed's val PSNR moves from seed to seed by more than many settings differ,
-    so the best of many single-seed settings is mostly the luckiest."""
+    runs the sweep's leaders), else the best validation PSNR of the first seed (the sweep's seed): one seed's val
+    PSNR moves by more than many settings differ, so the best of many single-seed settings is mostly the luckiest."""
     seeded = {s: vals for s, rows in groups.items() if len(vals := val_by_seed(rows, seeds)) == len(seeds)}
     if seeded:
         return max(seeded, key=lambda s: float(np.mean(list(seeded[s].values()))))

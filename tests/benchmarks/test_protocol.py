@@ -17,7 +17,7 @@ def commands(monkeypatch: pytest.MonkeyPatch) -> list[list[str]]:
     """Every command the harness launches; training writes views.json, evaluation its eval.json."""
     launched: list[list[str]] = []
 
-    def fake_run_timed(cmd: list[str], log: Path) -> tuple[float, float, int]:
+    def fake_run_timed(cmd: list[str], log: Path, env: dict | None = None) -> tuple[float, float, int]:
         launched.append(cmd)
         if cmd[0].endswith("fourierf-train"):
             threads = _threads(cmd) or "2"  # the trainer's log line; torch's default on a 2-core machine

@@ -1,8 +1,11 @@
-"""The equal-time stage: each method given the same wall time on each scene, as a user with T minutes would run it.
+"""The equal-time and equal-iterations stages: each method given the same wall time (or the same iterations) on each
+scene, as a user would run it.
 
 A point is (scene, method, budget): ``fourierf-train METHOD --time-budget B --threads 1`` with no size flag (the run
 is sized for the scene and the machine, the short-run rules applying as to any run), then ``fourierf-eval`` on the
-test views. One row a point in ``results/equal_time/results.jsonl``; a budget too short for a method's fewest
+test views. A budget of iterations ("800it") is ``--max-num-iterations 800`` in place of ``--time-budget``, the run
+otherwise sized as the default CPU run; its method may be a variant of the suite's (a method with flags). One row a
+point in ``results/equal_time/results.jsonl`` (``results/equal_iterations/``); a budget too short for a method's fewest
 iterations is a row that says so, not a failure.
 """
 
@@ -14,7 +17,7 @@ from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from harness import Run, Suite, cpu_and_cores, done_record, read_metrics, train_and_eval, train_command
+from harness import REPO, Run, Suite, cpu_and_cores, done_record, read_metrics, train_and_eval, train_command
 
 from fourierf_plugin.method_configs.time_budget import parse_duration
 
@@ -23,6 +26,34 @@ THREADS = 1
 TOO_SHORT = re.compile(r"--time-budget \S+ is too short[^\n]*")
 ESTIMATE = re.compile(r"~([0-9.e+-]+) s per iteration")
 """The trainer's own estimate in its too-short message: a method too slow for every budget still gets a speed."""
+ITERATION_BUDGET = re.compile(r"([1-9][0-9]*)it")
+EQUAL_ITERATIONS_RESULTS = REPO / "benchmarks" / "results" / "equal_iterations" / "results.jsonl"
+
+
+def budget_iterations(budget: str) -> int | None:
+    """The iterations of a budget such as "800it", or None (a wall-time budget such as "3m")."""
+    found = ITERATION_BUDGET.fullmatch(budget)
+    return int(found.group(1)) if found else None
+
+
+@dataclass(frozen=True)
+class IterationRun(Run):
+    """A run of ``iters`` iterations sized as the default CPU run (no grid or ray flag), keyed by its point's name
+    (a variant trains its method under its own key)."""
+
+    name: str = ""
+
+    @property
+    def key(self) -> str:
+        return f"{self.name or self.method}_{self.views}_{self.iters}it_s{self.seed}"
+
+    def sizes(self) -> list[str]:
+        return ["--max-num-iterations", str(self.iters)]
+
+
+def variants(suite: Suite) -> dict[str, dict]:
+    """The equal-iterations variants: a name → its method, flags and the scenes it runs on."""
+    return suite.equal_time["iterations"].get("variants", {})
 
 
 @dataclass(frozen=True)
@@ -36,7 +67,15 @@ class Point:
         return f"{self.scene}/{self.method}/{self.budget}"
 
     def run(self, suite: Suite) -> Run:
-        return Run(self.method, 0, suite.equal_time["seed"], "equal-time", self.budget)
+        seed, iterations = suite.equal_time["seed"], budget_iterations(self.budget)
+        if iterations is None:
+            return Run(self.method, 0, seed, "equal-time", self.budget)
+        method = variants(suite).get(self.method, {}).get("method", self.method)
+        return IterationRun(method, iterations, seed, "equal-iterations", name=self.method)
+
+    def flags(self, suite: Suite) -> list[str]:
+        """A variant's own flags (none for a plain method)."""
+        return list(variants(suite).get(self.method, {}).get("flags", []))
 
 
 def plan(
@@ -56,11 +95,32 @@ def plan(
     return [Point(scene, m, b) for b in longest_first for scene in scenes for m in methods], skipped
 
 
+def iteration_plan(
+    suite: Suite, scenes: Sequence[str], known: Collection[str], only: Sequence[str] | None = None
+) -> tuple[list[Point], list[str]]:
+    """The equal-iterations points in the suite's method order (slowest first, so two jobs at once end on short
+    runs), a variant only on its scenes, and a line for each method the registry does not know (skipped)."""
+    stage, found = suite.equal_time["iterations"], variants(suite)
+    wanted = only or stage["methods"]
+    base = {m: found.get(m, {}).get("method", m) for m in wanted}
+    skipped = [f"skipped {m}: no such method in this install's registry ({base[m]})" for m in wanted
+               if base[m] not in known]  # fmt: skip
+    points = [
+        Point(scene, m, stage["budget"])
+        for m in wanted
+        if base[m] in known
+        for scene in scenes
+        if scene in found.get(m, {}).get("scenes", scenes)
+    ]
+    return points, skipped
+
+
 def point_command(point: Point, suite: Suite, data: Path, work: Path) -> list[str]:
     """The training command of a point (what ``execute`` runs, without running it)."""
     run, scene = point.run(suite), suite.scenes[point.scene]
     parser = suite.parser_args(point.scene, suite.equal_time["protocol"])
-    return train_command(run, data / scene["path"], work / point.scene / "runs", parser, threads=THREADS)
+    extra = point.flags(suite)
+    return train_command(run, data / scene["path"], work / point.scene / "runs", parser, extra, threads=THREADS)
 
 
 def too_short(log: Path) -> str | None:
@@ -71,15 +131,18 @@ def too_short(log: Path) -> str | None:
 
 def execute(point: Point, suite: Suite, data: Path, work: Path, lpips: Path, jobs: int) -> dict:
     """Train and evaluate one point; its row (planned and actual training seconds from the run's metrics)."""
-    started, run = time.perf_counter(), point.run(suite)
+    started, run, iterations = time.perf_counter(), point.run(suite), budget_iterations(point.budget)
+    size = {"budget_iterations": iterations} if iterations else {"budget_seconds": parse_duration(point.budget)}
     row = {
-        "scene": point.scene, "method": point.method, "budget": point.budget,
-        "budget_seconds": parse_duration(point.budget), "threads": THREADS, "jobs": jobs, "machine": cpu_and_cores(),
+        "scene": point.scene, "method": point.method, "budget": point.budget, **size, "flags": point.flags(suite),
+        "threads": THREADS, "jobs": jobs, "machine": cpu_and_cores(),
     }  # fmt: skip
     parser = suite.parser_args(point.scene, suite.equal_time["protocol"])
     scene_data, scene_work = data / suite.scenes[point.scene]["path"], work / point.scene
     try:
-        trained = train_and_eval(run, scene_data, parser, scene_work, lpips, point.scene, threads=THREADS)
+        trained = train_and_eval(
+            run, scene_data, parser, scene_work, lpips, point.scene, point.flags(suite), threads=THREADS
+        )
     except RuntimeError:
         message = too_short(scene_work / f"{run.key}.train.log")
         if message is None:

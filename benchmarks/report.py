@@ -1,7 +1,7 @@
-"""The suite's report: regenerates the few-shot quality and the equal-time sections of BENCHMARKS.md (and the
-equal-time figure) from the committed rows.
+"""The suite's report: regenerates the few-shot quality, the equal-time and the equal-iterations sections of
+BENCHMARKS.md (and the equal-time figure) from the committed rows.
 
-    python benchmarks/report.py        # reads benchmarks/results/{quality,equal_time}/*.jsonl and suite.toml
+    python benchmarks/report.py        # reads benchmarks/results/{quality,equal_time,equal_iterations}/*.jsonl
 
 Each method at its own val-chosen setting per scene and protocol; the test PSNR of that setting only. Nothing is
 trained here: a section is a pure function of the rows, so it is regenerated at any time.
@@ -13,8 +13,10 @@ import argparse
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
+import equal_iterations_report as ei
 import equal_time_report as et
 import numpy as np
+from equal_time import EQUAL_ITERATIONS_RESULTS
 from harness import (
     EQUAL_TIME_RESULTS,
     QUALITY_RESULTS,
@@ -343,6 +345,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--results", type=Path, default=QUALITY_RESULTS, help="the rows run.py recorded")
     ap.add_argument("--equal-time", type=Path, default=EQUAL_TIME_RESULTS, help="the equal-time stage's rows")
+    ap.add_argument("--equal-iterations", type=Path, default=EQUAL_ITERATIONS_RESULTS, help="that stage's rows")
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")
     ap.add_argument("--figure", type=Path, default=REPO / et.FIGURE, help="the equal-time figure (SVG)")
     args = ap.parse_args()
@@ -351,6 +354,8 @@ def main() -> None:
     timed = list(load_results(args.equal_time).values())
     print(update_benchmarks_md(args.markdown, et.BEGIN, et.END, et.section(timed, SUITE)))
     args.figure.write_text(et.figure(timed, SUITE))
+    counted = list(load_results(args.equal_iterations).values())
+    print(update_benchmarks_md(args.markdown, ei.BEGIN, ei.END, ei.section(counted, SUITE)))
 
 
 if __name__ == "__main__":

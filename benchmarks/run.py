@@ -10,6 +10,7 @@ it has exactly its setting's values), then ``fourierf-eval`` scores it on the te
     python benchmarks/run.py sweep  --only S --again "threads not recorded"  # run recorded points again
     python benchmarks/run.py merge  --rows lane2/results.jsonl               # rows run elsewhere
     python benchmarks/run.py equal-time --scene lego fern --budget 1m 3m --jobs 2  # equal_time.py: wall-time budgets
+    python benchmarks/run.py equal-iterations --scene lego fern --jobs 2   # the same, each at the suite's iterations
     python benchmarks/report.py                                              # the BENCHMARKS.md sections
 
 ``--device cuda --jobs 4`` runs four trainings at once on one GPU. GPU runs are not bit-reproducible (grid_sample's
@@ -257,7 +258,7 @@ def curve_plan(args: argparse.Namespace, suite: Suite = SUITE) -> list[Point]:
 
 def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("stage", choices=("sweep", "seeds", "curve", "merge", "equal-time"))
+    ap.add_argument("stage", choices=("sweep", "seeds", "curve", "merge", "equal-time", "equal-iterations"))
     ap.add_argument("--protocol", nargs="+", choices=tuple(suite.protocols), default=None,
                     help="default: cpu-800 mid-3000 mid-800 (the curve stage: cpu-3000)")  # fmt: skip
     ap.add_argument("--scene", nargs="+", choices=tuple(suite.settings), default=list(suite.settings))
@@ -267,12 +268,15 @@ def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argpa
     ap.add_argument("--work", type=Path, default=None, help="run folders and logs (default: outputs/bench_STAGE)")
     ap.add_argument("--results", type=Path, default=None,
                     help="one row per finished run (the report reads it; finished runs are skipped); default: "
-                         "results/quality/results.jsonl, for equal-time results/equal_time/results.jsonl")  # fmt: skip
+                         "results/quality/results.jsonl, for equal-time results/equal_time/results.jsonl, for "
+                         "equal-iterations results/equal_iterations/results.jsonl")  # fmt: skip
     ap.add_argument("--budget", nargs="+", default=None,
                     help="equal-time: the --time-budget of each point (default: the suite's budgets)")  # fmt: skip
     ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
     ap.add_argument("--only", nargs="+", default=None, help="sweep only these settings (names from suite.toml)")
-    every_method = dict.fromkeys([*suite.methods, *suite.equal_time["methods"]])
+    every_method = dict.fromkeys(
+        [*suite.methods, *suite.equal_time["methods"], *suite.equal_time["iterations"]["methods"]]
+    )
     ap.add_argument("--methods", nargs="+", choices=tuple(every_method), default=None, help="run only these methods")
     ap.add_argument("--seeds", nargs="+", type=int, choices=suite.seeds[1:], default=None,
                     help="the seeds stage runs only these of the later seeds (default: all)")  # fmt: skip
@@ -287,12 +291,17 @@ def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argpa
                     help="merge: results files written elsewhere (another --results, the device)")  # fmt: skip
     args = ap.parse_args(argv)
     timed = args.stage == "equal-time"
-    args.work = args.work or REPO / "outputs" / ("bench_equal_time" if timed else "bench_quality")
-    args.results = args.results or (EQUAL_TIME_RESULTS if timed else QUALITY_RESULTS)
+    folder = {"equal-time": "bench_equal_time", "equal-iterations": "bench_equal_iterations"}.get(args.stage)
+    args.work = args.work or REPO / "outputs" / (folder or "bench_quality")
+    results = {"equal-time": EQUAL_TIME_RESULTS, "equal-iterations": equal_time.EQUAL_ITERATIONS_RESULTS}
+    args.results = args.results or results.get(args.stage, QUALITY_RESULTS)
     if args.budget is not None and not timed:
         sys.exit(f"error: --budget sets the equal-time stage's budgets; drop it for the {args.stage} stage")
     args.budget = args.budget or list(suite.equal_time["budgets"])
-    stage_methods = suite.equal_time["methods"] if timed else suite.methods
+    stage_methods = {
+        "equal-time": suite.equal_time["methods"],
+        "equal-iterations": suite.equal_time["iterations"]["methods"],
+    }.get(args.stage, suite.methods)
     if set(args.methods or ()) - set(stage_methods):
         sys.exit(f"error: --methods: the {args.stage} stage runs {', '.join(stage_methods)}; pass some of those")
     if args.protocol is None:
@@ -334,6 +343,11 @@ def main() -> None:
             points, skipped = equal_time.plan(SUITE, args.scene, args.budget, known, args.methods)
         except UserError as err:  # a --budget that is no duration
             sys.exit(f"error: --budget: {err}")
+        print("\n".join(skipped), flush=True)
+        run_all([equal_time_job(p, args) for p in points], args)
+        return
+    if args.stage == "equal-iterations":
+        points, skipped = equal_time.iteration_plan(SUITE, args.scene, equal_time.known_methods(), args.methods)
         print("\n".join(skipped), flush=True)
         run_all([equal_time_job(p, args) for p in points], args)
         return

@@ -1,0 +1,106 @@
+"""The equal-iterations stage without training: a point's command (an iteration budget, a variant's flags), its row
+from a faked run, and the report's tables and derived gaps from made-up rows."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import equal_iterations_report as rep
+import equal_time
+import harness
+import pytest
+
+from tests.benchmarks.test_equal_time import fake_runs  # noqa: F401 (a fixture)
+
+SUITE = harness.load_suite()
+SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "run.py"
+BUDGET = SUITE.equal_time["iterations"]["budget"]
+SIZE_FLAGS = ("--time-budget", "n-voxels", "rays-per-batch")
+
+
+def _row(scene: str, method: str, psnr: float) -> dict:
+    return {
+        "key": f"{scene}/{method}/800it", "scene": scene, "method": method, "budget": "800it",
+        "budget_iterations": 800, "iterations": 800, "trained_seconds": 400.0, "seconds_per_iteration": 0.5,
+        "psnr": psnr, "ssim": 0.8, "lpips": 0.2, "machine": "cpu, 2 cores", "jobs": 2, "seconds": 450.0,
+    }  # fmt: skip
+
+
+ROWS = [
+    _row("lego", "fourierf-vm-paper", 21.5),
+    _row("lego", "tensorf-vm-published", 19.25),
+    _row("lego", "zerorf-vm", 20.0),
+    _row("lego", "zerorf-vm-no-alpha", 18.75),
+    _row("fern", "fourierf-vm-paper", 18.0),
+    _row("fern", "tensorf-vm-published", 18.5),
+]
+
+
+def test_an_iteration_budget_is_max_iterations_with_no_size_flag(tmp_path: Path) -> None:
+    cmd = equal_time.point_command(equal_time.Point("fern", "tensorf-vm", BUDGET), SUITE, tmp_path, tmp_path / "w")
+    assert cmd[1] == "tensorf-vm" and cmd[cmd.index("--max-num-iterations") + 1] == BUDGET.removesuffix("it")
+    assert not any(flag in c for c in cmd for flag in SIZE_FLAGS) and cmd[cmd.index("--threads") + 1] == "1"
+    assert "--pipeline.model.alpha-weight" not in cmd
+    assert equal_time.budget_iterations("800it") == 800
+    assert equal_time.budget_iterations("3m") is equal_time.budget_iterations("0it") is None
+
+
+def test_a_variant_trains_its_method_with_its_flags_under_its_own_key(tmp_path: Path) -> None:
+    variant, plain = (equal_time.Point("lego", m, BUDGET) for m in ("zerorf-vm-no-alpha", "zerorf-vm"))
+    cmd = equal_time.point_command(variant, SUITE, tmp_path, tmp_path / "w")
+    assert cmd[1] == "zerorf-vm" and cmd[cmd.index("--pipeline.model.alpha-weight") + 1] == "0"
+    assert cmd.index("--pipeline.model.alpha-weight") < cmd.index("blender-data")  # a trainer flag, not a parser's
+    assert not any(flag in c for c in cmd for flag in SIZE_FLAGS)
+    assert variant.run(SUITE).key != plain.run(SUITE).key and variant.run(SUITE).key.startswith("zerorf-vm-no-alpha_")
+    assert "--pipeline.model.alpha-weight" not in equal_time.point_command(plain, SUITE, tmp_path, tmp_path / "w")
+
+
+def test_the_plan_runs_the_slowest_methods_first_and_a_variant_on_its_scenes_only() -> None:
+    known = equal_time.known_methods()
+    points, skipped = equal_time.iteration_plan(SUITE, ["lego", "fern"], known)
+    keys = [p.key for p in points]
+    assert keys[:3] == ["lego/zerorf-vm/800it", "fern/zerorf-vm/800it", "lego/zerorf-vm-no-alpha/800it"]
+    assert "fern/zerorf-vm-no-alpha/800it" not in keys and not any("freenerf" in k for k in keys)
+    assert len(keys) == 2 * len(SUITE.equal_time["iterations"]["methods"]) - 1 and not skipped
+    only, skipped = equal_time.iteration_plan(SUITE, ["fern"], known - {"zerorf-vm"}, ["zerorf-vm-no-alpha"])
+    assert only == [] and len(skipped) == 1 and "zerorf-vm-no-alpha" in skipped[0]
+
+
+def test_a_point_records_its_iterations_flags_and_metrics(fake_runs: dict, tmp_path: Path) -> None:  # noqa: F811
+    point = equal_time.Point("lego", "zerorf-vm-no-alpha", BUDGET)
+    row = equal_time.execute(point, SUITE, tmp_path, tmp_path, tmp_path, 2)
+    assert row["budget_iterations"] == 800 and "budget_seconds" not in row
+    assert row["flags"] == ["--pipeline.model.alpha-weight", "0"] and row["method"] == "zerorf-vm-no-alpha"
+    assert row["iterations"] == 500 and row["seconds_per_iteration"] == pytest.approx(0.11)
+    assert (row["psnr"], row["ssim"], row["lpips"]) == (21.0, 0.8, 0.2)
+    assert "/zerorf-vm/zerorf-vm-no-alpha_" in row["run_dir"]
+
+
+def test_the_derived_lines_give_each_gap_beside_the_papers() -> None:
+    lines = rep.derived_lines(ROWS, SUITE)
+    assert lines[0] == (
+        "- fourierf-vm-paper minus tensorf-vm-published, test PSNR: lego +2.25 dB (paper at full scale: +3.1 dB); "
+        "fern -0.50 dB (paper at full scale: +5.0 dB)."
+    )
+    assert lines[1] == "- zerorf-vm with minus without its alpha term (zerorf-vm-no-alpha) on lego: +1.25 dB."
+    missing = rep.derived_lines([r for r in ROWS if r["method"] != "zerorf-vm-no-alpha"], SUITE)
+    assert missing[1].endswith("on lego: not run.")
+
+
+def test_the_section_has_a_table_per_scene_and_says_what_is_missing() -> None:
+    lines = rep.section(ROWS, SUITE)
+    text = "\n".join(lines)
+    assert lines[0] == f"## {rep.TITLE}" and "freenerf is left out" in text and "loaded machine" in text
+    assert "| fourierf-vm-paper | 21.50 | 0.800 | 0.200 | 800 | 400 | 0.50 |" in lines
+    assert "| zerorf-vm | not run | | | | | |" in lines  # fern's zerorf-vm: no row
+    fern = lines[lines.index("### fern") :]
+    assert not any(line.startswith("| zerorf-vm-no-alpha") for line in fern)  # the variant runs on lego only
+    assert "No points" in "\n".join(rep.section([], SUITE))
+
+
+def test_a_method_outside_the_stage_is_one_clear_error(tmp_path: Path) -> None:
+    done = subprocess.run([sys.executable, str(SCRIPT), "equal-iterations", "--methods", "freenerf",
+                           "--work", str(tmp_path)], capture_output=True, text=True)  # fmt: skip
+    assert done.returncode != 0 and "zerorf-vm-no-alpha" in done.stderr and "Traceback" not in done.stderr

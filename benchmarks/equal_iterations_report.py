@@ -1,8 +1,9 @@
 """The equal-iterations section of BENCHMARKS.md, a pure function of the stage's rows (``run.py equal-iterations``).
 
-Per scene: test PSNR / SSIM / LPIPS, iterations and training time of each method at the suite's iteration budget;
-then the two comparisons the paper's systems call for: TensoRF as published against FourieRF as in the paper (beside
-the paper's gap at full scale), and ZeroRF with its alpha term against without it.
+Per scene: test PSNR / SSIM / LPIPS, iterations and training time of each method at each iteration budget it ran
+(the suite's, or a shorter one where a method is too slow for it); then the two comparisons the paper's systems call
+for, each between rows of the same iterations: TensoRF as published against FourieRF as in the paper (beside the
+paper's gap at full scale), and ZeroRF with its alpha term against without it.
 """
 
 from __future__ import annotations
@@ -18,19 +19,24 @@ PAPER, BASELINE = "fourierf-vm-paper", "tensorf-vm-published"
 ALPHA, NO_ALPHA = "zerorf-vm", "zerorf-vm-no-alpha"
 
 
-def find(rows: Sequence[dict], scene: str, method: str) -> dict | None:
-    """The trained row of a method (or variant) on a scene, or None."""
-    return next((r for r in rows if (r["scene"], r["method"]) == (scene, method) and "psnr" in r), None)
+def trained(rows: Sequence[dict], scene: str, method: str) -> list[dict]:
+    """The trained rows of a method (or variant) on a scene, most iterations first."""
+    found = [r for r in rows if (r["scene"], r["method"]) == (scene, method) and "psnr" in r]
+    return sorted(found, key=lambda r: -r["iterations"])
 
 
-def gap(rows: Sequence[dict], scene: str, ahead: str, behind: str) -> float | None:
-    """Test PSNR of ``ahead`` minus ``behind`` on a scene in dB, or None where either has no row."""
-    first, second = find(rows, scene, ahead), find(rows, scene, behind)
-    return None if first is None or second is None else first["psnr"] - second["psnr"]
+def gap(rows: Sequence[dict], scene: str, ahead: str, behind: str) -> tuple[float, int] | None:
+    """Test PSNR of ``ahead`` minus ``behind`` on a scene in dB at the most iterations both ran (and those
+    iterations), or None where they share no budget."""
+    for first in trained(rows, scene, ahead):
+        second = next((r for r in trained(rows, scene, behind) if r["budget"] == first["budget"]), None)
+        if second is not None:
+            return first["psnr"] - second["psnr"], first["iterations"]
+    return None
 
 
-def db(value: float | None) -> str:
-    return "not run" if value is None else f"{value:+.2f} dB"
+def db(found: tuple[float, int] | None) -> str:
+    return "not run at equal iterations" if found is None else f"{found[0]:+.2f} dB at {found[1]} iterations"
 
 
 def scene_table(rows: Sequence[dict], scene: str, methods: Sequence[str]) -> list[str]:
@@ -41,14 +47,12 @@ def scene_table(rows: Sequence[dict], scene: str, methods: Sequence[str]) -> lis
         "|---|---|---|---|---|---|---|",
     ]
     for method in methods:
-        row = find(rows, scene, method)
-        if row is None:
-            lines.append(f"| {method} | not run | | | | | |")
-            continue
-        lines.append(
+        found = trained(rows, scene, method)
+        lines += [
             f"| {method} | {row['psnr']:.2f} | {row['ssim']:.3f} | {row['lpips']:.3f} | {row['iterations']} | "
             f"{row['trained_seconds']:.0f} | {row['seconds_per_iteration']:.2f} |"
-        )
+            for row in found
+        ] or [f"| {method} | not run | | | | | |"]
     return [*lines, ""]
 
 
@@ -78,8 +82,10 @@ def section(rows: Sequence[dict], suite: Suite) -> list[str]:
         f"applying as they would), then `fourierf-eval` on the test views; lego at {side}×{side}. {NO_ALPHA} is "
         "zerorf-vm with `--pipeline.model.alpha-weight 0`, on lego only (fern's images carry no alpha). freenerf is "
         "left out: at over ten seconds an iteration on this CPU, the budget takes hours; the equal-time section "
-        "covers it. Training seconds come from a shared, loaded machine (other work ran beside these points); the "
-        "equal-time section has the quiet-machine speeds.",
+        "covers it. A method too slow for that budget here runs a shorter one (`--budget 150it`), the iterations "
+        "column saying which; each derived line compares rows of equal iterations only. Training seconds come from "
+        "a shared, loaded machine (other work ran beside these points); the equal-time section has the "
+        "quiet-machine speeds.",
         machine=f"{machines}, one thread a run",
     )
     if not rows:

@@ -96,17 +96,19 @@ def plan(
 
 
 def iteration_plan(
-    suite: Suite, scenes: Sequence[str], known: Collection[str], only: Sequence[str] | None = None
+    suite: Suite, scenes: Sequence[str], known: Collection[str], only: Sequence[str] | None = None,
+    budget: str | None = None,
 ) -> tuple[list[Point], list[str]]:
-    """The equal-iterations points in the suite's method order (slowest first, so two jobs at once end on short
-    runs), a variant only on its scenes, and a line for each method the registry does not know (skipped)."""
+    """The equal-iterations points at ``budget`` (the suite's by default) in the suite's method order (slowest first,
+    so two jobs at once end on short runs), a variant only on its scenes, and a line for each method the registry does
+    not know (skipped)."""
     stage, found = suite.equal_time["iterations"], variants(suite)
     wanted = only or stage["methods"]
     base = {m: found.get(m, {}).get("method", m) for m in wanted}
     skipped = [f"skipped {m}: no such method in this install's registry ({base[m]})" for m in wanted
                if base[m] not in known]  # fmt: skip
     points = [
-        Point(scene, m, stage["budget"])
+        Point(scene, m, budget or stage["budget"])
         for m in wanted
         if base[m] in known
         for scene in scenes

@@ -271,7 +271,8 @@ def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argpa
                          "results/quality/results.jsonl, for equal-time results/equal_time/results.jsonl, for "
                          "equal-iterations results/equal_iterations/results.jsonl")  # fmt: skip
     ap.add_argument("--budget", nargs="+", default=None,
-                    help="equal-time: the --time-budget of each point (default: the suite's budgets)")  # fmt: skip
+                    help="equal-time: the --time-budget of each point (default: the suite's budgets); "
+                         "equal-iterations: one budget of iterations such as 200it (default: the suite's)")  # fmt: skip
     ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
     ap.add_argument("--only", nargs="+", default=None, help="sweep only these settings (names from suite.toml)")
     every_method = dict.fromkeys(
@@ -295,9 +296,17 @@ def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argpa
     args.work = args.work or REPO / "outputs" / (folder or "bench_quality")
     results = {"equal-time": EQUAL_TIME_RESULTS, "equal-iterations": equal_time.EQUAL_ITERATIONS_RESULTS}
     args.results = args.results or results.get(args.stage, QUALITY_RESULTS)
-    if args.budget is not None and not timed:
+    counted = args.stage == "equal-iterations"
+    if args.budget is not None and not (timed or counted):
         sys.exit(f"error: --budget sets the equal-time stage's budgets; drop it for the {args.stage} stage")
-    args.budget = args.budget or list(suite.equal_time["budgets"])
+    if (
+        counted
+        and args.budget is not None
+        and (len(args.budget) != 1 or not equal_time.budget_iterations(args.budget[0]))
+    ):
+        sys.exit(f"error: --budget {' '.join(args.budget)}: the equal-iterations stage takes one count, e.g. 200it")
+    default = [suite.equal_time["iterations"]["budget"]] if counted else list(suite.equal_time["budgets"])
+    args.budget = args.budget or default
     stage_methods = {
         "equal-time": suite.equal_time["methods"],
         "equal-iterations": suite.equal_time["iterations"]["methods"],
@@ -347,7 +356,8 @@ def main() -> None:
         run_all([equal_time_job(p, args) for p in points], args)
         return
     if args.stage == "equal-iterations":
-        points, skipped = equal_time.iteration_plan(SUITE, args.scene, equal_time.known_methods(), args.methods)
+        known = equal_time.known_methods()
+        points, skipped = equal_time.iteration_plan(SUITE, args.scene, known, args.methods, args.budget[0])
         print("\n".join(skipped), flush=True)
         run_all([equal_time_job(p, args) for p in points], args)
         return

@@ -20,10 +20,11 @@ BUDGET = SUITE.equal_time["iterations"]["budget"]
 SIZE_FLAGS = ("--time-budget", "n-voxels", "rays-per-batch")
 
 
-def _row(scene: str, method: str, psnr: float) -> dict:
+def _row(scene: str, method: str, psnr: float, iterations: int = 800) -> dict:
     return {
-        "key": f"{scene}/{method}/800it", "scene": scene, "method": method, "budget": "800it",
-        "budget_iterations": 800, "iterations": 800, "trained_seconds": 400.0, "seconds_per_iteration": 0.5,
+        "key": f"{scene}/{method}/{iterations}it", "scene": scene, "method": method, "budget": f"{iterations}it",
+        "budget_iterations": iterations, "iterations": iterations, "trained_seconds": iterations / 2,
+        "seconds_per_iteration": 0.5,
         "psnr": psnr, "ssim": 0.8, "lpips": 0.2, "machine": "cpu, 2 cores", "jobs": 2, "seconds": 450.0,
     }  # fmt: skip
 
@@ -31,8 +32,8 @@ def _row(scene: str, method: str, psnr: float) -> dict:
 ROWS = [
     _row("lego", "fourierf-vm-paper", 21.5),
     _row("lego", "tensorf-vm-published", 19.25),
-    _row("lego", "zerorf-vm", 20.0),
-    _row("lego", "zerorf-vm-no-alpha", 18.75),
+    _row("lego", "zerorf-vm", 20.0, 150),
+    _row("lego", "zerorf-vm-no-alpha", 18.75, 150),
     _row("fern", "fourierf-vm-paper", 18.0),
     _row("fern", "tensorf-vm-published", 18.5),
 ]
@@ -81,12 +82,25 @@ def test_a_point_records_its_iterations_flags_and_metrics(fake_runs: dict, tmp_p
 def test_the_derived_lines_give_each_gap_beside_the_papers() -> None:
     lines = rep.derived_lines(ROWS, SUITE)
     assert lines[0] == (
-        "- fourierf-vm-paper minus tensorf-vm-published, test PSNR: lego +2.25 dB (paper at full scale: +3.1 dB); "
-        "fern -0.50 dB (paper at full scale: +5.0 dB)."
+        "- fourierf-vm-paper minus tensorf-vm-published, test PSNR: lego +2.25 dB at 800 iterations (paper at full "
+        "scale: +3.1 dB); fern -0.50 dB at 800 iterations (paper at full scale: +5.0 dB)."
     )
-    assert lines[1] == "- zerorf-vm with minus without its alpha term (zerorf-vm-no-alpha) on lego: +1.25 dB."
+    assert lines[1] == (
+        "- zerorf-vm with minus without its alpha term (zerorf-vm-no-alpha) on lego: +1.25 dB at 150 iterations."
+    )
     missing = rep.derived_lines([r for r in ROWS if r["method"] != "zerorf-vm-no-alpha"], SUITE)
-    assert missing[1].endswith("on lego: not run.")
+    assert missing[1].endswith("on lego: not run at equal iterations.")
+
+
+def test_a_gap_compares_rows_of_equal_iterations_only() -> None:
+    longer = [*ROWS, _row("lego", "zerorf-vm", 23.0, 800)]  # no 800-iteration row without alpha: 150 it is
+    assert rep.gap(longer, "lego", "zerorf-vm", "zerorf-vm-no-alpha") == (pytest.approx(1.25), 150)
+    both = [*longer, _row("lego", "zerorf-vm-no-alpha", 22.5, 800)]  # the most iterations both ran win
+    assert rep.gap(both, "lego", "zerorf-vm", "zerorf-vm-no-alpha") == (pytest.approx(0.5), 800)
+    apart = [_row("fern", "fourierf-vm-paper", 18.0, 800), _row("fern", "tensorf-vm-published", 18.5, 150)]
+    assert rep.gap(apart, "fern", "fourierf-vm-paper", "tensorf-vm-published") is None
+    table = rep.scene_table(longer, "lego", ["zerorf-vm"])
+    assert [line.split(" | ")[4] for line in table if line.startswith("| zerorf-vm |")] == ["800", "150"]
 
 
 def test_the_section_has_a_table_per_scene_and_says_what_is_missing() -> None:
@@ -94,6 +108,7 @@ def test_the_section_has_a_table_per_scene_and_says_what_is_missing() -> None:
     text = "\n".join(lines)
     assert lines[0] == f"## {rep.TITLE}" and "freenerf is left out" in text and "loaded machine" in text
     assert "| fourierf-vm-paper | 21.50 | 0.800 | 0.200 | 800 | 400 | 0.50 |" in lines
+    assert "| zerorf-vm-no-alpha | 18.75 | 0.800 | 0.200 | 150 | 75 | 0.50 |" in lines
     assert "| zerorf-vm | not run | | | | | |" in lines  # fern's zerorf-vm: no row
     fern = lines[lines.index("### fern") :]
     assert not any(line.startswith("| zerorf-vm-no-alpha") for line in fern)  # the variant runs on lego only
@@ -104,3 +119,15 @@ def test_a_method_outside_the_stage_is_one_clear_error(tmp_path: Path) -> None:
     done = subprocess.run([sys.executable, str(SCRIPT), "equal-iterations", "--methods", "freenerf",
                            "--work", str(tmp_path)], capture_output=True, text=True)  # fmt: skip
     assert done.returncode != 0 and "zerorf-vm-no-alpha" in done.stderr and "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize("budget", [["3m"], ["150it", "300it"]])
+def test_a_budget_that_is_not_one_count_of_iterations_is_one_clear_error(tmp_path: Path, budget: list[str]) -> None:
+    done = subprocess.run([sys.executable, str(SCRIPT), "equal-iterations", "--budget", *budget,
+                           "--work", str(tmp_path)], capture_output=True, text=True)  # fmt: skip
+    assert done.returncode != 0 and "200it" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_a_shorter_budget_plans_every_point_at_it() -> None:
+    points, _ = equal_time.iteration_plan(SUITE, ["lego"], equal_time.known_methods(), ["zerorf-vm"], "150it")
+    assert [p.key for p in points] == ["lego/zerorf-vm/150it"] and points[0].run(SUITE).iters == 150

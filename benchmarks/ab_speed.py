@@ -1,29 +1,16 @@
 """Interleaved A/B of two versions of fourierf on protocol P-CPU: is the new one as fast as the old one?
 
-Each version is exported into its own flat folder (the package with ``method_configs`` and ``data/parsers`` put in
-their installed places) and run from there with ``python -m fourierf_plugin.scripts.train`` / ``.eval``, so both
-sides run in this one invocation on this machine, alternating which goes first in each pair:
+Each version is exported into its own folder laid out as installed and run from there, alternating which side goes
+first in each pair; reported per side are whole runs, the final phase (steps 601–800, from the runs' logs), in-process
+iterations at step 700 and test-view renders (medians, new/old), and each run's test PSNR (equal seeds, equal PSNRs
+when the arithmetic did not change). ``--old-flags`` / ``--new-flags`` time an option instead, in a section of its own.
 
-    python benchmarks/ab_speed.py --old HEAD            # the working tree against the last commit, 3 pairs
-    python benchmarks/ab_speed.py --old abc123 --new def456 --pairs 5
+    python benchmarks/ab_speed.py --old HEAD [--new REV] [--pairs 3] [--scene fern] --describe "what differs"
     python benchmarks/ab_speed.py --old HEAD --new HEAD --new-flags "--pipeline.model.entropy-weight 0.00003"
-
-The last form times an option rather than a change: one version, the new side trained with extra flags (each side's
-flags go before the data parser's), reported in a section of its own so a default change's A/B stays.
-
-P-CPU: lego 4 views (r_27 r_76 r_97 r_99), 100×100, batch 1024, grid 64³ → 128³, 800 iterations, the official code's
-optimiser (weight decay 0, no lr decay), 25 test views; or, with ``--scene fern``, fern 3 views at images_8 on the same
-grid, batch and budget under the real-scene preset (a change to a forward-facing default). Reported per side: the
-median final-phase seconds per iteration (iterations 601–800, from the runs' own logs, no profiler) and the median
-time to render the test views (``fourierf-eval``'s render seconds), the new/old ratios, and the test PSNR of each run
-(equal seeds must give equal PSNRs when the arithmetic did not change). Takes about 4 minutes per run on two cores;
-keep the machine quiet. Each scene has its own BENCHMARKS.md section, which says what differs between the sides
-(``--describe`` and any side's extra flags); the revisions each side ran are recorded in ``--work``'s meta.json.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import shlex
@@ -40,16 +27,23 @@ from harness import (
     OFFICIAL_OPTIMISER,
     PCPU_LEGO_PARSER,
     REPO,
+    arguments,
     elapsed_by_step,
+    eval_cmd,
     markers,
+    read_jsonl,
     read_metrics,
-    run_timed,
+    run_checked,
+    seconds_per_iteration,
     section_head,
+    train_cmd,
     update_benchmarks_md,
+    write_jsonl,
 )
 
 SOURCES = ("fourierf_plugin", "method_configs", "data/parsers")
 INSTALLED = {"method_configs": "fourierf_plugin/method_configs", "data/parsers": "fourierf_plugin/data/parsers"}
+MODULE = (sys.executable, "-P", "-m")
 
 
 @dataclass(frozen=True)
@@ -82,36 +76,25 @@ class Scene:
 
 
 SCENES = {
-    "lego": Scene(
-        "blender/lego", tuple(OFFICIAL_OPTIMISER),
-        tuple(PCPU_LEGO_PARSER),
-        "Speed A/B of a change to a default (lego, interleaved)", "ab_speed",
-    ),
-    "fern": Scene(
-        "llff/fern", (), ("llff-data", "--num-views", "3"),
-        "Speed A/B of a change to a forward-facing default (fern, interleaved)", "ab_speed_fern",
-    ),
+    "lego": Scene("blender/lego", tuple(OFFICIAL_OPTIMISER), tuple(PCPU_LEGO_PARSER),
+                  "Speed A/B of a change to a default (lego, interleaved)", "ab_speed"),
+    "fern": Scene("llff/fern", (), ("llff-data", "--num-views", "3"),
+                  "Speed A/B of a change to a forward-facing default (fern, interleaved)", "ab_speed_fern"),
 }  # fmt: skip
 BEGIN, END = SCENES["lego"].begin, SCENES["lego"].end
 FINAL = (600, 800)  # the final phase: after the last upsample (step 560)
 ITERATION_TIMER = """
 import sys, time, torch
+from fourierf_plugin.accel.allocator import keep_freed_memory
 from fourierf_plugin.configs.base import load_config
 from fourierf_plugin.engine.checkpoint import load_latest_checkpoint
+from fourierf_plugin.engine.machine import seed_everything
 from fourierf_plugin.engine.optimizers import build_optimizer
 from fourierf_plugin.engine.trainer import TrainerConfig
-try:  # this project after its redesign
-    from fourierf_plugin.accel.allocator import keep_freed_memory
-    from fourierf_plugin.engine.machine import seed_everything
-    from fourierf_plugin.method_configs import config_registry
-    registry = (config_registry(),)
-except ImportError:  # before it
-    from fourierf_plugin.engine.trainer import seed_everything
-    from fourierf_plugin.utils.allocator import keep_freed_memory
-    registry = ()
+from fourierf_plugin.method_configs import config_registry
 keep_freed_memory()
 run_dir, step, warmup, iters = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
-config = load_config(run_dir + "/config.json", TrainerConfig, *registry)
+config = load_config(run_dir + "/config.json", TrainerConfig, config_registry())
 pipeline = config.pipeline.setup(device=torch.device("cpu"), max_iters=800, generator=seed_everything(config.seed))
 pipeline.load_state_dict(load_latest_checkpoint(run_dir + "/checkpoints")[1]["pipeline"])
 optimizer = build_optimizer(config.optimizer, pipeline.model.param_groups())
@@ -126,17 +109,17 @@ print((time.perf_counter() - start) / iters)
 """
 
 
+def git(*args: str) -> str:
+    return subprocess.run(["git", *args], cwd=REPO, check=True, capture_output=True, text=True).stdout.strip()
+
+
 def export_tree(rev: str | None, where: Path) -> Path:
     """The package of ``rev`` (None: the working tree, as it is now) laid out as installed, under ``where``."""
     if where.exists():
         shutil.rmtree(where)
     where.mkdir(parents=True)
     if rev is None:
-        listed = subprocess.run(
-            ["git", "ls-files", "--cached", "--others", "--exclude-standard", *SOURCES],
-            cwd=REPO, check=True, capture_output=True, text=True,
-        ).stdout.split()  # fmt: skip
-        for name in listed:
+        for name in git("ls-files", "--cached", "--others", "--exclude-standard", *SOURCES).split():
             if (REPO / name).is_file():
                 (where / name).parent.mkdir(parents=True, exist_ok=True)
                 shutil.copy2(REPO / name, where / name)
@@ -151,15 +134,10 @@ def export_tree(rev: str | None, where: Path) -> Path:
 def revision_label(rev: str | None) -> str:
     """What a side ran, for meta.json: ``rev`` with its short commit id, or the working tree on its commit, marked when
     it held uncommitted changes."""
-    head = subprocess.run(
-        ["git", "rev-parse", "--short", rev or "HEAD"], cwd=REPO, check=True, capture_output=True, text=True
-    ).stdout.strip()
+    head = git("rev-parse", "--short", rev or "HEAD")
     if rev is not None:
         return rev if rev.startswith(head) else f"{rev} ({head})"
-    dirty = subprocess.run(
-        ["git", "status", "--porcelain", "--untracked-files=no", *SOURCES], cwd=REPO, check=True, capture_output=True,
-        text=True,
-    ).stdout.strip()  # fmt: skip
+    dirty = git("status", "--porcelain", "--untracked-files=no", *SOURCES)
     return f"the working tree on {head}" + (", with uncommitted changes" if dirty else "")
 
 
@@ -171,32 +149,22 @@ def run_side(
     env = dict(os.environ, PYTHONPATH=str(code))
     out = work / "runs" / label
     shutil.rmtree(out, ignore_errors=True)
-    train = [
-        sys.executable, "-P", "-m", "fourierf_plugin.scripts.train", "fourierf-vm",
-        "--data", str(shared / "data" / scene.data), "--output-dir", str(out), "--timestamp", "run",
-        "--seed", str(seed), "--max-num-iterations", "800",
-        "--log-every", "50", *GRID_FLAGS, *scene.flags, *flags, *scene.parser,
-    ]  # fmt: skip
-    wall, _, code_ = run_timed(train, work / f"{label}.train.log", env)
-    if code_ != 0:
-        raise RuntimeError(f"training failed; see {work / f'{label}.train.log'}")
+    sizes = ["--seed", str(seed), "--max-num-iterations", "800", "--log-every", "50", *GRID_FLAGS]
+    train = train_cmd("fourierf-vm", shared / "data" / scene.data, out, "run", *sizes, *scene.flags, *flags,
+                      *scene.parser, program=(*MODULE, "fourierf_plugin.scripts.train"))  # fmt: skip
+    wall, _ = run_checked(train, work / f"{label}.train.log", "training", env)
     run_dir = out / scene.name / "fourierf-vm" / "run"
-    elapsed = elapsed_by_step(read_metrics(run_dir / "metrics.jsonl"))
     report = work / f"{label}.eval.json"
-    evaluate = [
-        sys.executable, "-P", "-m", "fourierf_plugin.scripts.eval", "--load-config", str(run_dir / "config.json"),
-        "--output-path", str(report), "--render-dir", "none", "--overwrite",
-        "--lpips-weights", str(shared / "lpips/lpips_alex_v0.1.pth"),
-    ]  # fmt: skip
-    _, _, code_ = run_timed(evaluate, work / f"{label}.eval.log", env)
-    if code_ != 0:
-        raise RuntimeError(f"evaluation failed; see {work / f'{label}.eval.log'}")
+    lpips = str(shared / "lpips/lpips_alex_v0.1.pth")
+    evaluate = eval_cmd(run_dir, report, "--render-dir", "none", "--lpips-weights", lpips,
+                        program=(*MODULE, "fourierf_plugin.scripts.eval"))  # fmt: skip
+    run_checked(evaluate, work / f"{label}.eval.log", "evaluation", env)
     result = json.loads(report.read_text())
     return {
         "label": label,
         "seed": seed,
         "train_wall_s": wall,
-        "final_s_per_it": (elapsed[FINAL[1]] - elapsed[FINAL[0]]) / (FINAL[1] - FINAL[0]),
+        "final_s_per_it": seconds_per_iteration(elapsed_by_step(read_metrics(run_dir / "metrics.jsonl")), *FINAL),
         "render_s": result["timings"]["render_seconds_total"],
         "psnr": result["results"]["psnr"],
     }
@@ -206,13 +174,11 @@ def time_iterations(code: Path, run_dir: Path, step: int = 700, warmup: int = 5,
     """Seconds per training iteration at ``step`` on a run's final saved state, in a fresh process of ``code``."""
     env = dict(os.environ, PYTHONPATH=str(code))
     cmd = [sys.executable, "-P", "-c", ITERATION_TIMER, str(run_dir), str(step), str(warmup), str(iters)]
-    out = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout
-    return float(out.split()[-1])
+    return float(subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout.split()[-1])
 
 
 def summary(rows: list[dict], timings: dict[str, list[float]], meta: dict) -> list[str]:
-    """The A/B as markdown: whole runs, the final phase, in-process iterations and renders per side (medians), their
-    new/old ratios, and each run's test PSNR."""
+    """The A/B as markdown: per side the medians, their new/old ratios, and each run's test PSNR."""
 
     def med(side: str, key: str) -> float:
         return statistics.median(r[key] for r in rows if r["side"] == side)
@@ -253,37 +219,29 @@ def summary(rows: list[dict], timings: dict[str, list[float]], meta: dict) -> li
 
 def write_report(work: Path, markdown: Path) -> list[str]:
     """The BENCHMARKS.md section of the A/B recorded in ``work`` (results.jsonl, iterations.json, meta.json)."""
-    names = ("results.jsonl", "iterations.json", "meta.json")
-    missing = [name for name in names if not (work / name).is_file()]
+    missing = [name for name in ("results.jsonl", "iterations.json", "meta.json") if not (work / name).is_file()]
     if missing:
         sys.exit(f"error: no A/B recorded in {work} (missing {', '.join(missing)}); run the A/B first")
-    rows = [json.loads(line) for line in (work / "results.jsonl").read_text().splitlines() if line.strip()]
-    timings = json.loads((work / "iterations.json").read_text())
-    meta = json.loads((work / "meta.json").read_text())
-    scene = SCENES[meta.get("scene", "lego")]  # records before --scene were lego's
+    timings, meta = (json.loads((work / name).read_text()) for name in ("iterations.json", "meta.json"))
+    scene = SCENES[meta.get("scene", "lego")]  # a record without a scene is lego's
     if meta.get("old_flags") or meta.get("new_flags"):
         scene = scene.for_option()
-    lines = summary(rows, timings, meta)
-    body = section_head(scene.title, meta["command"])
-    update_benchmarks_md(markdown, scene.begin, scene.end, [*body, *lines, ""])
+    lines = summary(read_jsonl(work / "results.jsonl"), timings, meta)
+    update_benchmarks_md(markdown, scene.begin, scene.end, [*section_head(scene.title, meta["command"]), *lines, ""])
     return lines
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = arguments(__doc__, None)
     ap.add_argument("--old", default="HEAD", help="git revision of the baseline")
     ap.add_argument("--new", default=None, help="git revision to compare (default: the working tree)")
-    ap.add_argument("--describe", default="",
-                    help="what differs between the sides, without history: it goes into BENCHMARKS.md")  # fmt: skip
+    ap.add_argument("--describe", default="", help="what differs between the sides (it goes into BENCHMARKS.md)")
     ap.add_argument("--old-flags", default="", help="training flags of the old side only (one string)")
     ap.add_argument("--new-flags", default="", help="training flags of the new side only (one string)")
     ap.add_argument("--pairs", type=int, default=3)
     ap.add_argument("--seeds", type=int, nargs="+", default=[20211202, 1, 2])
-    ap.add_argument("--shared", type=Path, default=REPO.parent / "shared")
     ap.add_argument("--scene", choices=tuple(SCENES), default="lego")
-    ap.add_argument("--work", type=Path, default=None, help="default: outputs/bench_ab_speed (lego), ..._fern (fern)")
     ap.add_argument("--iteration-repeats", type=int, default=6, help="alternating in-process timings per side")
-    ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")
     ap.add_argument("--report", action="store_true", help="only rewrite BENCHMARKS.md from the A/B recorded in --work")
     args = ap.parse_args()
     scene = SCENES[args.scene]
@@ -291,7 +249,7 @@ def main() -> None:
         flags = {"old": shlex.split(args.old_flags), "new": shlex.split(args.new_flags)}
     except ValueError as err:
         ap.error(f"--old-flags / --new-flags: {err}; quote each side's flags as one shell string")
-    if args.work is None:
+    if args.work is None:  # outputs/bench_ab_speed (lego), outputs/bench_ab_speed_fern (fern)
         args.work = REPO / "outputs" / ("bench_ab_speed" if args.scene == "lego" else f"bench_ab_speed_{args.scene}")
     if args.report:
         print("\n".join(write_report(args.work, args.markdown)))
@@ -303,15 +261,13 @@ def main() -> None:
     rows = []
     for i in range(args.pairs):
         seed = args.seeds[i % len(args.seeds)]
-        order = ("old", "new") if i % 2 == 0 else ("new", "old")
-        for side in order:
-            row = run_side(codes[side], f"{side}-{i}", seed, args.work, args.shared, scene, flags[side])
-            row |= {"side": side}
-            rows.append(row)
-            print(json.dumps(row), flush=True)
-    (args.work / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
-    # The final phase again, with less noise: 40 iterations at step 700 on each side's own final state (the same
-    # state: equal seeds train identically), in short processes alternating old, new, old, ...
+        for side in ("old", "new") if i % 2 == 0 else ("new", "old"):
+            rows.append(run_side(codes[side], f"{side}-{i}", seed, args.work, args.shared, scene, flags[side]))
+            rows[-1]["side"] = side
+            print(json.dumps(rows[-1]), flush=True)
+    write_jsonl(args.work / "results.jsonl", rows)
+    # The final phase again, with less noise: 40 iterations at step 700 on each side's own final state (equal seeds
+    # train identically), in short processes alternating old, new, old, ...
     first = {side: args.work / "runs" / f"{side}-0" / scene.name / "fourierf-vm" / "run" for side in ("old", "new")}
     timings: dict[str, list[float]] = {"old": [], "new": []}
     for i in range(args.iteration_repeats):

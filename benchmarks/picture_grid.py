@@ -1,14 +1,9 @@
-"""A picture grid of held-out views: ground truth | one run | another run, RGB above depth and accumulation.
-
-Why: a PSNR says how far the renders are, not what is wrong with them. Ghosting on a forward-facing scene shows as
-doubled edges in RGB, and in depth as geometry at two distances or a layer of density hanging in front of the
-cameras (floaters); accumulation below 1 shows where a run left space empty. Depth uses one range per view for all
-runs (the first run's 1-99 percentiles), so the same colour is the same distance in every column.
+"""A picture grid of held-out views: ground truth | one run | another run, RGB above depth and accumulation, each run
+rendered as ``fourierf-eval`` renders it. Ghosting shows as doubled edges in RGB and as geometry at two distances or
+floaters in depth (one range per view, the first run's); accumulation below 1 shows space a run left empty.
 
     python benchmarks/picture_grid.py --runs A/config.json B/config.json --labels fourierf-vm tensorf-vm \
         --output docs/fern_grid.png
-
-Each run is rendered in this process the way ``fourierf-eval`` renders it (its test split, or ``--split``).
 """
 
 from __future__ import annotations
@@ -28,9 +23,8 @@ from fourierf_plugin.utils.colormaps import colorize_accumulation, colorize_dept
 
 
 def columns(config: Path, split: str, views: int, names: Sequence[str] = ()) -> list[dict]:
-    """The split's views named in ``names`` (in the split's order; else its first ``views``) rendered as
-    ``fourierf-eval`` renders them: rgb, target, depth and accumulation. Names are checked before anything renders (a
-    400×400 view takes a minute)."""
+    """The split's views named in ``names`` (else its first ``views``) rendered: rgb, target, depth and accumulation.
+    Names are checked before anything renders (a view takes a minute)."""
     run = load_run(config, config_registry(), device="cpu")
     split_names = [view.name for view in run.pipeline.datamanager.eval_views(split)]
     missing = [name for name in names if name not in split_names]
@@ -64,8 +58,7 @@ def main() -> None:
         low, high = depth_range(renders[0][k]["depth"].numpy(), renders[0][k]["acc"].numpy())  # first run's range
         depth = [colorize_depth(col[k]["depth"], col[k]["acc"], low, high) for col in renders]
         acc = [colorize_accumulation(col[k]["acc"]) for col in renders]
-        rows += [np.concatenate(rgb, axis=1), np.concatenate([blank, *depth], axis=1)]
-        rows.append(np.concatenate([blank, *acc], axis=1))
+        rows += [np.concatenate(rgb, axis=1), np.concatenate([blank, *depth], axis=1), np.concatenate([blank, *acc], 1)]
     names = [view["name"] for view in renders[0]]
     args.output.parent.mkdir(parents=True, exist_ok=True)
     grid = np.concatenate(rows, axis=0)

@@ -1,16 +1,13 @@
 """Real-capture benchmark: an object in a textured room photographed as a phone capture (``fourierf-synth --kind
-room``: RGB, no alpha, cameras on a partial arc), reconstructed with its surroundings (the unbounded scene kind).
-
-fourierf-vm and tensorf-vm at the default CPU budget from 8 views and from every training photo: test PSNR / SSIM /
-LPIPS, and the Chamfer distance of the exported mesh (the object's box, capture frame) to the true object's surface.
-Writes its BENCHMARKS.md section and a picture of test views (photo, RGB and depth of both methods).
+room``), reconstructed with its surroundings. fourierf-vm and tensorf-vm at the default CPU budget from 8 views and
+from every photo: test PSNR / SSIM / LPIPS, the Chamfer distance of the exported mesh to the true object's surface,
+and a picture of test views (photo, RGB and depth of both methods).
 
     python benchmarks/room_capture.py [--threads 2] [--shared ../shared]
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import subprocess
 from pathlib import Path
@@ -22,39 +19,29 @@ from harness import (
     BIN,
     REPO,
     Run,
+    arguments,
     done_record,
     evaluate,
-    markers,
     read_metrics,
+    run_checked,
     run_plan,
     run_timed,
     section_head,
     thread_flags,
-    update_benchmarks_md,
+    train_cmd,
+    write_section,
 )
 
 from fourierf_plugin.utils.geometry import chamfer_distance, mesh_surface_points
 
-BEGIN, END = markers("room-capture", "room_capture.py")
 METHODS = ("fourierf-vm", "tensorf-vm")
 VIEWS = ("8", "all")
 TARGETS = {"8": 22.0, "all": 28.0}
-"""Test PSNR each view count should reach (issue: a real capture must work)."""
+"""Test PSNR each view count should reach."""
 CROP_PADDING = 0.1
 """The mesh is scored inside the true object's box grown by this share of its size on each side."""
 PICTURE_VIEWS = 2
-
-
-def write_room(folder: Path) -> None:
-    if not (folder / "transforms.json").is_file():
-        subprocess.run([str(BIN / "fourierf-synth"), "--output-dir", str(folder), "--kind", "room"], check=True)
-
-
-def object_truth(room: Path) -> tuple[np.ndarray, np.ndarray]:
-    """Points on the true object's surface and its box, in the capture's frame."""
-    cloud = trimesh.load(room / "object_surface.ply")
-    bounds = np.asarray(json.loads((room / "geometry.json").read_text())["object"]["bounds"], dtype=np.float64)
-    return np.asarray(cloud.vertices, dtype=np.float64), bounds
+NO_MESH = {"chamfer": None, "mesh_to_truth": None, "truth_to_mesh": None}
 
 
 def crop(mesh: trimesh.Trimesh, bounds: np.ndarray) -> trimesh.Trimesh:
@@ -66,44 +53,34 @@ def crop(mesh: trimesh.Trimesh, bounds: np.ndarray) -> trimesh.Trimesh:
 
 
 def mesh_scores(run_dir: Path, work: Path, key: str, room: Path) -> dict:
+    """The exported mesh, cropped to the object's box (capture frame), against points on the true object's surface."""
     path = work / f"{key}.ply"
     cmd = [
         str(BIN / "fourierf-export"), "marching-cubes", "--load-config", str(run_dir / "config.json"),
         "--output-path", str(path), "--resolution", "192", "--overwrite",
     ]  # fmt: skip
-    _, _, code = run_timed(cmd, work / f"{key}.export.log")
-    if code != 0:
-        return {"chamfer": None, "mesh_to_truth": None, "truth_to_mesh": None}
-    truth, bounds = object_truth(room)
+    if run_timed(cmd, work / f"{key}.export.log")[2] != 0:
+        return NO_MESH
+    bounds = np.asarray(json.loads((room / "geometry.json").read_text())["object"]["bounds"], dtype=np.float64)
     mesh = crop(trimesh.load(path, force="mesh"), bounds)
     if len(mesh.faces) == 0:
-        return {"chamfer": None, "mesh_to_truth": None, "truth_to_mesh": None}
+        return NO_MESH
+    truth = np.asarray(trimesh.load(room / "object_surface.ply").vertices, dtype=np.float64)
     cd = chamfer_distance(mesh_surface_points(mesh, 50_000, seed=0), truth)
     return {"chamfer": cd["chamfer"], "mesh_to_truth": cd["a_to_b_mean"], "truth_to_mesh": cd["b_to_a_mean"]}
-
-
-def finished_training(run_dir: Path) -> float | None:
-    """The training seconds of a run that finished in ``run_dir`` (its ``done`` record), else None."""
-    done = done_record(read_metrics(run_dir / "metrics.jsonl"))
-    return None if done is None else float(done["train_seconds"])
 
 
 def execute(run: Run, room: Path, work: Path, lpips: Path, threads: int | None) -> dict:
     out_dir = work / "runs"
     run_dir = out_dir / room.name / run.method / run.key
     views = [] if run.views == "all" else ["--num-views", run.views]
-    cmd = [
-        str(BIN / "fourierf-train"), run.method, "--data", str(room), "--output-dir", str(out_dir),
-        "--timestamp", run.key, "--seed", str(run.seed), *thread_flags(threads), "nerfstudio-data", *views,
-    ]  # fmt: skip
-    log = work / f"{run.key}.train.log"
-    finished = finished_training(run_dir)
-    if finished is None:
-        seconds, rss, code = run_timed(cmd, log)
-        if code != 0:
-            raise RuntimeError(f"training failed ({code}); see {log}")
+    done = done_record(read_metrics(run_dir / "metrics.jsonl"))
+    if done is None:
+        cmd = train_cmd(run.method, room, out_dir, run.key, "--seed", str(run.seed), *thread_flags(threads),
+                        "nerfstudio-data", *views)  # fmt: skip
+        seconds, rss = run_checked(cmd, work / f"{run.key}.train.log", "training")
     else:  # trained by an earlier invocation that stopped before its row was written
-        seconds, rss = finished, None
+        seconds, rss = float(done["train_seconds"]), None
     config = json.loads((run_dir / "config.json").read_text())["config"]
     row = {
         "key": run.key, "method": run.method, "views": run.views, "seed": run.seed,
@@ -115,21 +92,18 @@ def execute(run: Run, room: Path, work: Path, lpips: Path, threads: int | None) 
     return row | mesh_scores(run_dir, work, run.key, room)
 
 
-def render_test_views(run_dir: Path, work: Path, key: str, threads: int | None) -> Path:
-    folder = work / f"{key}_renders"
-    if not folder.is_dir():
-        cmd = [
-            str(BIN / "fourierf-render"), "dataset", "--load-config", str(run_dir / "config.json"),
-            "--output-dir", str(folder), "--outputs", "rgb", "depth", "--no-video", *thread_flags(threads),
-        ]  # fmt: skip
-        subprocess.run(cmd, check=True, capture_output=True)
-    return folder
-
-
 def picture(rows: dict[str, dict], room: Path, work: Path, threads: int | None, path: Path) -> None:
     """Test views, one row each: the photo, then each method's RGB and depth (8 views)."""
-    eight = {m: rows[f"{m}_8"] for m in METHODS}
-    folders = {m: render_test_views(Path(r["run_dir"]), work, r["key"], threads) for m, r in eight.items()}
+    folders = {}
+    for method in METHODS:
+        row = rows[f"{method}_8"]
+        folders[method] = work / f"{row['key']}_renders"
+        if not folders[method].is_dir():
+            cmd = [
+                str(BIN / "fourierf-render"), "dataset", "--load-config", str(Path(row["run_dir"]) / "config.json"),
+                "--output-dir", str(folders[method]), "--outputs", "rgb", "depth", "--no-video", *thread_flags(threads),
+            ]  # fmt: skip
+            subprocess.run(cmd, check=True, capture_output=True)
     names = sorted(p.stem for p in (folders[METHODS[0]] / "rgb").glob("*.png"))[::3][:PICTURE_VIEWS]
     lines = []
     for name in names:
@@ -141,8 +115,19 @@ def picture(rows: dict[str, dict], room: Path, work: Path, threads: int | None, 
     iio.imwrite(path, np.concatenate(lines, axis=0))
 
 
-def table(rows: dict[str, dict]) -> list[str]:
+def section(rows: dict[str, dict], seed: int, picture_link: Path) -> list[str]:
     lines = [
+        *section_head(
+            "Object in a room: a synthetic phone capture (unbounded scene)",
+            "python benchmarks/room_capture.py",
+            "`fourierf-synth --kind room` (160×120 RGB, no alpha, 30 training photos on a 110° arc, 8 test views "
+            "between them); each method at the size the trainer picks for the machine, seed "
+            f"{seed}; 8 views picked by k-means on the camera centres. The mesh is `fourierf-export "
+            "marching-cubes --resolution 192` (the object's box, capture frame), scored inside the true object's box "
+            f"grown by {CROP_PADDING:.0%} a side against 20k points on the true object's surface (scene units; the "
+            "object is about 0.5 wide). Train seconds are wall time with other work on the machine: not a speed "
+            "measurement (BENCHMARKS.md's speed sections are).",
+        ),
         "| method | views | iterations | test PSNR | target | SSIM | LPIPS | Chamfer | mesh → object | object → mesh "
         "| train s |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
@@ -151,51 +136,34 @@ def table(rows: dict[str, dict]) -> list[str]:
         for method in METHODS:
             r = rows[f"{method}_{views}"]
             met = "met" if r["psnr"] >= TARGETS[views] else f"missed by {TARGETS[views] - r['psnr']:.2f}"
-            mesh = [f"{r[k]:.4f}" if r[k] is not None else "—" for k in ("chamfer", "mesh_to_truth", "truth_to_mesh")]
+            mesh = [f"{r[k]:.4f}" if r[k] is not None else "—" for k in NO_MESH]
             lines.append(
                 f"| {method} | {r['train_views']} | {r['iterations']} | {r['psnr']:.2f} | ≥ {TARGETS[views]:.0f} "
                 f"({met}) | {r['ssim']:.3f} | {r['lpips']:.3f} | {' | '.join(mesh)} | {r['train_seconds']:.0f} |"
             )
-    return lines
+    alt = "test views: photo, fourierf-vm RGB and depth, tensorf-vm RGB and depth (8 views)"
+    return [*lines, "", f"![{alt}]({picture_link})"]
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--work", type=Path, default=REPO / "outputs" / "bench_room_capture")
-    ap.add_argument("--shared", type=Path, default=REPO.parent / "shared")
+    ap = arguments(__doc__, "bench_room_capture")
     ap.add_argument("--seed", type=int, default=20211202)
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--results", type=Path, default=REPO / "benchmarks" / "results" / "room_capture" / "results.jsonl")
     ap.add_argument("--picture", type=Path, default=REPO / "docs" / "room_capture.png")
-    ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")
     args = ap.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
     args.results.parent.mkdir(parents=True, exist_ok=True)
     room = args.work / "room"
-    write_room(room)
+    if not (room / "transforms.json").is_file():
+        subprocess.run([str(BIN / "fourierf-synth"), "--output-dir", str(room), "--kind", "room"], check=True)
     lpips = args.shared / "lpips" / "lpips_alex_v0.1.pth"
     plan = [Run(m, 0, args.seed, v) for v in VIEWS for m in METHODS]
     results = run_plan(plan, args.results, lambda run: execute(run, room, args.work, lpips, args.threads))
     rows = {f"{r['method']}_{r['views']}": r for r in results.values()}
     picture(rows, room, args.work, args.threads, args.picture)
-    picture_link = args.picture.relative_to(REPO) if args.picture.is_relative_to(REPO) else args.picture
-    body = [
-        *section_head(
-            "Object in a room: a synthetic phone capture (unbounded scene)",
-            "python benchmarks/room_capture.py",
-            "`fourierf-synth --kind room` (160×120 RGB, no alpha, 30 training photos on a 110° arc, 8 test views "
-            "between them); each method at the size the trainer picks for the machine, seed "
-            f"{args.seed}; 8 views picked by k-means on the camera centres. The mesh is `fourierf-export "
-            "marching-cubes --resolution 192` (the object's box, capture frame), scored inside the true object's box "
-            f"grown by {CROP_PADDING:.0%} a side against 20k points on the true object's surface (scene units; the "
-            "object is about 0.5 wide). Train seconds are wall time with other work on the machine: not a speed "
-            "measurement (BENCHMARKS.md's speed sections are).",
-        ),
-        *table(rows),
-        "",
-        f"![test views: photo, fourierf-vm RGB and depth, tensorf-vm RGB and depth (8 views)]({picture_link})",
-    ]
-    print(update_benchmarks_md(args.markdown, BEGIN, END, body))
+    link = args.picture.relative_to(REPO) if args.picture.is_relative_to(REPO) else args.picture
+    write_section(args.markdown, "room-capture", "room_capture.py", section(rows, args.seed, link))
 
 
 if __name__ == "__main__":

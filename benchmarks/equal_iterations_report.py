@@ -82,7 +82,7 @@ def section(rows: Sequence[dict], suite: Suite) -> list[str]:
         f"applying as they would), then `fourierf-eval` on the test views; lego at {side}×{side}. {NO_ALPHA} is "
         "zerorf-vm with `--pipeline.model.alpha-weight 0`, on lego only (fern's images carry no alpha). freenerf is "
         "left out: at over ten seconds an iteration on this CPU, the budget takes hours; the equal-time section "
-        "covers it. A method too slow for that budget here runs a shorter one (`--budget 150it`), the iterations "
+        "covers it. A method too slow for that budget here runs a shorter one (`--budget Nit`), the iterations "
         "column saying which; each derived line compares rows of equal iterations only. Training seconds come from "
         "a shared, loaded machine (other work ran beside these points); the equal-time section has the "
         "quiet-machine speeds.",

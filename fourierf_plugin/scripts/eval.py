@@ -78,6 +78,7 @@ def run_eval(cfg: EvalConfig) -> dict:
             claimed = None if cfg.overwrite else render_dir
         renders = None if skips_renders(render_dir) else render_dir
         if renders is not None:
+            renders.parent.mkdir(parents=True, exist_ok=True)  # RUN/renders/ on a first --overwrite evaluation
             locks.append(lock_output(renders, "--render-dir"))
         report = evaluate(run, cfg.split, lpips, renders, print_view, cfg.overwrite)
         if renders is not None:

@@ -25,20 +25,15 @@ from harness import (
     run_dir_in,
     seconds_per_iteration,
     section_head,
+    size_flags,
     train_cmd,
     write_jsonl,
     write_section,
 )
 
 PAPER = {"lego": 22.41, "fern": 20.97}
-SIZES = [
-    "--max-num-iterations", "10000", "--pipeline.datamanager.rays-per-batch", "4096",
-    "--pipeline.model.field.n-voxels-init", str(128**3), "--pipeline.model.field.n-voxels-final", str(300**3),
-]  # fmt: skip
-TINY = [
-    "--max-num-iterations", "20", "--log-every", "5", "--pipeline.datamanager.rays-per-batch", "256",
-    "--pipeline.model.field.n-voxels-init", "4096", "--pipeline.model.field.n-voxels-final", "13824",
-]  # fmt: skip
+SIZES = ["--max-num-iterations", "10000", *size_flags(4096, (128, 300))]
+TINY = ["--max-num-iterations", "20", "--log-every", "5", *size_flags(256, (16, 24))]
 
 
 def protocols(shared: Path, tiny: bool) -> dict[str, tuple[Path, list[str]]]:

@@ -29,12 +29,18 @@ PCPU_LEGO_PARSER = ["blender-data", "--downscale", "4", "--test-every", "8", "--
 """P-CPU's lego: 4 views at 100×100, every 8th test view."""
 OFFICIAL_OPTIMISER = ["--optimizer.weight-decay", "0", "--optimizer.lr-decay-ratio", "1.0"]
 """The official code's optimiser: no weight decay, no learning-rate decay."""
-GRID_FLAGS = [
-    "--pipeline.datamanager.rays-per-batch", "1024",
-    "--pipeline.model.field.n-voxels-init", str(64**3),
-    "--pipeline.model.field.n-voxels-final", str(128**3),
-    "--steps-per-save", "100000",
-]  # fmt: skip
+
+
+def size_flags(rays: int, grid: tuple[int, int]) -> list[str]:
+    """Rays per batch and the grid's initial and final side as training flags."""
+    return [
+        "--pipeline.datamanager.rays-per-batch", str(rays),
+        "--pipeline.model.field.n-voxels-init", str(grid[0] ** 3),
+        "--pipeline.model.field.n-voxels-final", str(grid[1] ** 3),
+    ]  # fmt: skip
+
+
+GRID_FLAGS = [*size_flags(1024, (64, 128)), "--steps-per-save", "100000"]
 
 
 def arguments(doc: str | None, work: str | None) -> argparse.ArgumentParser:
@@ -339,12 +345,7 @@ class Protocol:
     """The protocol of the same sizes at 800 iterations, whose val choice a curve along this one trains."""
 
     def flags(self) -> list[str]:
-        return [
-            "--pipeline.datamanager.rays-per-batch", str(self.rays),
-            "--pipeline.model.field.n-voxels-init", str(self.grid[0] ** 3),
-            "--pipeline.model.field.n-voxels-final", str(self.grid[1] ** 3),
-            "--steps-per-save", "100000",
-        ]  # fmt: skip
+        return [*size_flags(self.rays, self.grid), "--steps-per-save", "100000"]
 
 
 @dataclass(frozen=True)

@@ -23,12 +23,14 @@ from pathlib import Path
 import numpy as np
 from harness import (
     GRID_FLAGS,
+    LEGO_VIEWS,
     PCPU_LEGO_PARSER,
     REPO,
     arguments,
     done_record,
     elapsed_by_step,
     read_metrics,
+    run_checked,
     run_dir_in,
     section_head,
     train_cmd,
@@ -41,7 +43,6 @@ from fourierf_plugin.viewer.headless import CHROMIUM, CHROMIUM_ARGS
 from fourierf_plugin.viewer.render_service import camera_from_dataset, render_view
 from fourierf_plugin.viewer.scene_view import scene_layout
 
-VIEWS = ("27", "76", "97", "99")
 SQUARE_WINDOW = {"width": 704, "height": 704}
 """A square page, so the preview is 256×256."""
 LATENCY_TARGET_S = 0.5
@@ -246,8 +247,7 @@ def measure_slowdown(data: Path, work: Path, rounds: int, iters: int) -> dict:
             cmd, log = pcpu_train(data, out, stamp, iters, *extra), work / f"{stamp}.log"
             print(f"training {stamp} ...", flush=True)
             if flags is None:
-                with log.open("w") as fh:
-                    subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT, check=True, cwd=REPO)
+                run_checked(cmd, log, "training")
             else:
                 browser_cpu[arm].append(train_with_browser(cmd, port, log))
             if arm == "viewer":
@@ -316,7 +316,8 @@ def section(latency: dict, final: dict, ab: dict, command: str, iters: int, roun
         return ", ".join(f"{v:.{digits}f}" for v in values)
 
     settings = (
-        f"P-CPU lego (fourierf-vm, views {' '.join('r_' + v for v in VIEWS)}, 100×100, 64³ → 128³, {iters} iterations)."
+        f"P-CPU lego (fourierf-vm, views {' '.join('r_' + v for v in LEGO_VIEWS)}, 100×100, 64³ → 128³, {iters}"
+        " iterations)."
         " Latency: one headless chromium (704×704 window), the camera turned from the server; time from the command"
         " to the first preview handed to the page's connection. Slowdown: training seconds (metrics.jsonl) of three"
         f" arms, {rounds} interleaved rounds (order rotating), same flags: no viewer; `--viewer True"
@@ -379,9 +380,7 @@ def main(argv: Sequence[str] | None = None) -> None:
             config = existing[0]
         else:
             print("training the P-CPU run ...", flush=True)
-            with (args.work / "final.log").open("w") as fh:
-                cmd = pcpu_train(data, out, stamp, args.iters)
-                subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT, check=True, cwd=REPO)
+            run_checked(pcpu_train(data, out, stamp, args.iters), args.work / "final.log", "training")
             config = run_dir_in(out, "fourierf-vm", stamp) / "config.json"
     if args.screenshots_only:
         args.docs.mkdir(parents=True, exist_ok=True)

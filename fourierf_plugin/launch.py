@@ -31,33 +31,19 @@ def launch(module: str, command: str) -> None:
     entrypoint()
 
 
-def _script(name: str) -> None:
-    launch(f"fourierf_plugin.scripts.{name}", "fourierf-" + name.replace("_", "-"))
+def _console_script(name: str) -> Callable[[], None]:
+    """The entry point of ``fourierf-<name>`` (``fourierf_plugin.scripts.<name>``, dashes as underscores)."""
+
+    def run() -> None:
+        launch(f"fourierf_plugin.scripts.{name}", "fourierf-" + name.replace("_", "-"))
+
+    return run
 
 
-def train() -> None:
-    _script("train")
-
-
-def evaluate() -> None:
-    _script("eval")
-
-
-def export() -> None:
-    _script("export")
-
-
-def render() -> None:
-    _script("render")
-
-
-def synth() -> None:
-    _script("synth")
-
-
-def process_data() -> None:
-    _script("process_data")
-
-
-def viewer() -> None:
-    _script("viewer")
+train = _console_script("train")
+evaluate = _console_script("eval")
+export = _console_script("export")
+render = _console_script("render")
+synth = _console_script("synth")
+process_data = _console_script("process_data")
+viewer = _console_script("viewer")

@@ -1,9 +1,7 @@
-"""Interleaved A/B of two versions of fourierf on protocol P-CPU: is the new one as fast as the old one?
-
-Each version is exported into its own folder laid out as installed and run from there, alternating which side goes
-first in each pair; reported per side are whole runs, the final phase (steps 601–800, from the runs' logs), in-process
-iterations at step 700 and test-view renders (medians, new/old), and each run's test PSNR (equal seeds, equal PSNRs
-when the arithmetic did not change). ``--old-flags`` / ``--new-flags`` time an option instead, in a section of its own.
+"""Interleaved A/B of two versions of fourierf on protocol P-CPU: is the new one as fast as the old one? Each version
+runs from its own export, alternating which side goes first; per side: whole runs, the final phase (steps 601–800),
+in-process iterations at step 700, test renders (medians, new/old) and each run's test PSNR. ``--old-flags`` /
+``--new-flags`` time an option instead, in a section of its own.
 
     python benchmarks/ab_speed.py --old HEAD [--new REV] [--pairs 3] [--scene fern] --describe "what differs"
     python benchmarks/ab_speed.py --old HEAD --new HEAD --new-flags "--pipeline.model.entropy-weight 0.00003"

@@ -1,6 +1,5 @@
-"""The paper's protocols on a GPU (sec. 4): time, final-phase seconds per iteration (the last 20 % of the steps), peak
-GPU memory and PSNR next to the paper's. Lego: 4 views (27 76 97 99) at 800×800, every test view; fern: 3 views at
-1/8 resolution under the real-scene preset; both 10,000 iterations, batch 4096, grid 128³ → 300³.
+"""The paper's lego and fern protocols (sec. 4: 10,000 iterations, batch 4096, grid 128³ → 300³) on a GPU: time,
+final-phase seconds per iteration, peak GPU memory and PSNR next to the paper's.
 
     python benchmarks/gpu_protocol.py                      # on a CUDA machine: lego and fern
     python benchmarks/gpu_protocol.py --tiny --device cpu  # the same pipeline end to end at toy size (the test)

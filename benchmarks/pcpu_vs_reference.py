@@ -1,6 +1,5 @@
-"""P-CPU against the official FourieRF code (``../shared/peer/run_pcpu.sh``, its CPU patches), reference and this
-project interleaved seed by seed; ours is scored on the test views at every 10 % of the run (untimed), so the time to
-the reference's final PSNR is known (an upper bound: the reference's own time to it is taken as its whole run).
+"""P-CPU against the official FourieRF code (``../shared/peer``, CPU patches), interleaved seed by seed: ratios of
+time to the reference's final PSNR (ours scored every 10 % of the run, untimed), per iteration and per run.
 
     ../shared/peer/setup.sh                                  # once: the reference's virtualenv
     python benchmarks/pcpu_vs_reference.py [--report-only]   # --report-only: the section from results.jsonl

@@ -1,6 +1,5 @@
-"""A picture grid of held-out views: ground truth | one run | another run, RGB above depth and accumulation, each run
-rendered as ``fourierf-eval`` renders it. Ghosting shows as doubled edges in RGB and as geometry at two distances or
-floaters in depth (one range per view, the first run's); accumulation below 1 shows space a run left empty.
+"""A picture grid of held-out views: ground truth | one run | another run, RGB above depth (one range per view, the
+first run's) and accumulation, to see ghosting and floaters a PSNR does not show.
 
     python benchmarks/picture_grid.py --runs A/config.json B/config.json --labels fourierf-vm tensorf-vm \
         --output docs/fern_grid.png

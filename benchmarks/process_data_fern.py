@@ -1,6 +1,5 @@
-"""``fourierf-process-data images`` on fern's 20 images_8 photos (504×378), real photos nobody here wrote: images
-registered (target ≥ 18), median rotation and camera-centre errors after aligning the recovered cameras to fern's
-``poses_bounds.npy`` by a similarity (targets ≤ 1° and ≤ 2 % of the reference cameras' extent), and wall time.
+"""``fourierf-process-data images`` on fern's 20 real images_8 photos: images registered, rotation and camera-centre
+errors after aligning to fern's ``poses_bounds.npy`` by a similarity, and wall time, against their targets.
 
     python benchmarks/process_data_fern.py [--shared PATH] [--work outputs/bench_process_data_fern]
 """

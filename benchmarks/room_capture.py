@@ -1,7 +1,5 @@
-"""Real-capture benchmark: an object in a textured room photographed as a phone capture (``fourierf-synth --kind
-room``), reconstructed with its surroundings. fourierf-vm and tensorf-vm at the default CPU budget from 8 views and
-from every photo: test PSNR / SSIM / LPIPS, the Chamfer distance of the exported mesh to the true object's surface,
-and a picture of test views (photo, RGB and depth of both methods).
+"""An object in a textured room as a synthetic phone capture (``fourierf-synth --kind room``): fourierf-vm and
+tensorf-vm from 8 views and from every photo, test metrics and the exported mesh's Chamfer distance to the object.
 
     python benchmarks/room_capture.py [--threads 2] [--shared ../shared]
 """

@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 
 import torch
 
-from fourierf_plugin.engine.estimates import checkpoint_bytes, run_shape, save_seconds
+from fourierf_plugin.engine.estimates import checkpoint_bytes, mean_rays_per_batch, run_shape, save_seconds
 from fourierf_plugin.engine.machine import pick_device, seed_everything
 from fourierf_plugin.engine.optimizers import build_optimizer
 from fourierf_plugin.engine.trainer import TrainerConfig, optimisation_step
@@ -89,10 +89,24 @@ def plan_iterations(budget_s: float, cost: StepCost, margin: float = MARGIN, min
     return low
 
 
+def at_mean_batch(config: TrainerConfig) -> TrainerConfig:
+    """``config`` with every batch at its run's mean ray count: a batch that grows along the run (ZeroRF's schedule)
+    is then timed at its average rather than at its first, smallest size."""
+    manager = config.pipeline.datamanager
+    if not manager.rays_per_batch_schedule:
+        return config
+    timed = copy.deepcopy(config)
+    timed.pipeline.datamanager = replace(
+        manager, rays_per_batch=round(mean_rays_per_batch(config)), rays_per_batch_schedule=None
+    )
+    return timed
+
+
 def measure_first_steps(config: TrainerConfig, warmup: int = WARMUP_STEPS, steps: int = TIMED_STEPS) -> float:
-    """Seconds per iteration of ``steps`` real iterations of ``config``'s pipeline (a finished config), after
-    ``warmup`` untimed ones, on a throwaway copy built on the run's device and threads; the trainer seeds itself
-    again, so the run it starts afterwards is the same as without this."""
+    """Seconds per iteration of ``steps`` real iterations of ``config``'s pipeline (a finished config) at its mean
+    batch, after ``warmup`` untimed ones, on a throwaway copy built on the run's device and threads; the trainer
+    seeds itself again, so the run it starts afterwards is the same as without this."""
+    config = at_mean_batch(config)
     if config.threads is not None:
         torch.set_num_threads(config.threads)
     device = pick_device(config.device)

@@ -146,3 +146,20 @@ def test_a_count_is_planned_only_from_a_cost_timed_under_its_own_rules(monkeypat
     budgeted, _ = finalize(parse_args([*args, "--time-budget", "10m"]), given_options([*args, "--time-budget"]))
     assert budgeted.max_num_iterations == boundary - 1
     assert budgeted.planned_train_seconds == pytest.approx((boundary - 1) * cheap)
+
+
+def test_a_growing_batch_is_timed_at_its_mean_and_a_fixed_one_as_it_is():
+    from fourierf_plugin.engine.estimates import mean_rays_per_batch
+
+    def finished(method: str):
+        args = [method, "--data", str(TINY_SCENE), "--device", "cpu"]
+        return finalize(parse_args(args), given_options(args))[0]
+
+    zerorf = finished("zerorf-vm")
+    timed = time_budget.at_mean_batch(zerorf)
+    assert zerorf.pipeline.datamanager.rays_per_batch_schedule
+    assert timed.pipeline.datamanager.rays_per_batch_schedule is None
+    assert timed.pipeline.datamanager.rays_per_batch == round(mean_rays_per_batch(zerorf))
+    assert timed.pipeline.datamanager.rays_per_batch > zerorf.pipeline.datamanager.rays_per_batch
+    fourierf = finished("fourierf-vm")
+    assert time_budget.at_mean_batch(fourierf) is fourierf

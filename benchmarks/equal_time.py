@@ -17,7 +17,7 @@ from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from harness import REPO, Run, Suite, cpu_and_cores, done_record, read_metrics, train_and_eval, train_command
+from harness import Run, Suite, cpu_and_cores, done_record, read_metrics, train_and_eval, train_command
 
 from fourierf_plugin.method_configs.time_budget import parse_duration
 
@@ -27,7 +27,6 @@ TOO_SHORT = re.compile(r"--time-budget \S+ is too short[^\n]*")
 ESTIMATE = re.compile(r"~([0-9.e+-]+) s per iteration")
 """The trainer's own estimate in its too-short message: a method too slow for every budget still gets a speed."""
 ITERATION_BUDGET = re.compile(r"([1-9][0-9]*)it")
-EQUAL_ITERATIONS_RESULTS = REPO / "benchmarks" / "results" / "equal_iterations" / "results.jsonl"
 
 
 def budget_iterations(budget: str) -> int | None:

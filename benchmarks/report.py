@@ -1,23 +1,20 @@
-"""The suite's report: regenerates the few-shot quality, the equal-time and the equal-iterations sections of
-BENCHMARKS.md (and the equal-time figure) from the committed rows.
+"""The suite's report: the few-shot quality, equal-time and equal-iterations sections of BENCHMARKS.md and the
+equal-time figure, pure functions of the committed rows (nothing is trained here).
 
     python benchmarks/report.py        # reads benchmarks/results/{quality,equal_time,equal_iterations}/*.jsonl
-
-Each method at its own val-chosen setting per scene and protocol; the test PSNR of that setting only. Nothing is
-trained here: a section is a pure function of the rows, so it is regenerated at any time.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from xml.sax.saxutils import escape
 
-import equal_iterations_report as ei
-import equal_time_report as et
 import numpy as np
-from equal_time import EQUAL_ITERATIONS_RESULTS
 from harness import (
+    EQUAL_ITERATIONS_RESULTS,
     EQUAL_TIME_RESULTS,
     QUALITY_RESULTS,
     REPEATS,
@@ -28,18 +25,22 @@ from harness import (
     load_results,
     load_suite,
     markers,
-    read_repeats,
+    md_row,
+    read_jsonl,
     rows_by,
     section_head,
+    table,
+    titled_table,
     update_benchmarks_md,
     val_by_seed,
 )
 
 SUITE = load_suite()
-BEGIN, END = markers("quality", "report.py")
+QUALITY, TIMED, COUNTED = (markers(name, "report.py") for name in ("quality", "equal-time", "equal-iterations"))
 F, T = "fourierf-vm", "tensorf-vm"
 
 
+# -- few-shot quality: each method at its own val-chosen setting per scene and protocol ----------------------------
 def val_cell(rows: list[dict], seeds: Sequence[int]) -> str:
     """A setting's val PSNR for the sweep table: the first seed's, and the mean over every seed where all were run,
     else over the seeds that were (named, as such a mean does not take part in the choice)."""
@@ -74,19 +75,14 @@ def curve_table(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
         if short and setting != r["setting"]:
             against += f" (`{setting}`)"
         lines.append(f"| {r['scene']} | {r['method']} | `{r['setting']}` | {against} | {steps} |")
-    if not lines:
-        return []
-    return [
+    return titled_table(
         "Along the budget (`run.py curve`): one run of 3000 iterations, its checkpoints every "
         f"{suite.curve_every} iterations evaluated on val and test, against a run of 800 iterations with the same "
         "sizes and setting (its schedules are fractions of its own length, so step 800 of the long run is not the "
         "short run). Val / test PSNR:",
-        "",
-        "| scene | method | setting | 800-iteration run | 3000-iteration run, step: val / test |",
-        "|---|---|---|---|---|",
-        *lines,
-        "",
-    ]
+        ["scene", "method", "setting", "800-iteration run", "3000-iteration run, step: val / test"],
+        lines,
+    )
 
 
 def first_seed_row(results: dict[str, dict], protocol: str, method: str, setting: str, suite: Suite) -> dict | None:
@@ -152,17 +148,12 @@ def targets_table(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
             f"| {t['scene']}, {t['protocol']}: fourierf-vm {at_least}≥ +{t['lead']:.1f} dB; {t['against']} | "
             f"{cells[0]} | {cells[1]} | **{lead:+.2f}** ({per_seed}) | {status} |"
         )
-    if not lines:
-        return []
-    return [
+    return titled_table(
         "The quality targets, measured (test PSNR, mean ± std over the seeds; the lead per seed in brackets, seeds "
         f"{', '.join(map(str, suite.seeds))}; each choice made on val among the settings the baseline allows):",
-        "",
-        "| target | fourierf-vm: setting, test PSNR (seeds) | tensorf-vm: setting, test PSNR (seeds) | lead | status |",
-        "|---|---|---|---|---|",
-        *lines,
-        "",
-    ]
+        ["target", *(f"{m}: setting, test PSNR (seeds)" for m in (F, T)), "lead", "status"],
+        lines,
+    )
 
 
 def later_seeds_table(results: dict[str, dict], repeats: Sequence[dict], suite: Suite = SUITE) -> list[str]:
@@ -185,22 +176,16 @@ def later_seeds_table(results: dict[str, dict], repeats: Sequence[dict], suite: 
             f"| {scene} | {protocol} | {method} | `{setting}`{f' ({note})' if note else ''} | {cells} "
             f"| {val:.2f} / {test:.2f} |"
         )
-    if not lines:
-        return []
-    seeds = " | ".join(f"seed {seed}: val / test" for seed in later)
-    return [
+    return titled_table(
         f"Settings run on seeds {', '.join(map(str, later))} on a GPU (an H100, several runs at once), beside "
         "their other runs: `-plain` is TensoRF's ReLU for the density, `-revive1` revives every dark batch (the "
         "budget rule's for a forward-facing run over 800 iterations), no suffix the field's default, which revives "
         "a field only when it is dead. GPU training is not bit-reproducible "
         "(grid_sample's CUDA backward accumulates with atomics), so a repeat of one setting and seed is the spread "
         "a difference must clear.",
-        "",
-        f"| scene | protocol | method | setting | {seeds} | mean val / test |",
-        "|---|---|---|---|" + "---|" * len(later) + "---|",
-        *lines,
-        "",
-    ]
+        ["scene", "protocol", "method", "setting", *(f"seed {seed}: val / test" for seed in later), "mean val / test"],
+        lines,
+    )
 
 
 def threads_cell(rows: Iterable[dict]) -> str:
@@ -224,17 +209,12 @@ def cpu_reruns_table(results: dict[str, dict], repeats: Sequence[dict]) -> list[
             f"| {kept['scene']} | {kept['protocol']} | {kept['method']} | `{kept['setting']}` | "
             f"{kept['seed']} | {cells[0]} | {cells[1]} | {other['repeat']} |"
         )
-    if not lines:
-        return []
-    return [
+    return titled_table(
         "CPU runs of one setting and seed run twice: the row the tables above read and the other run (`repeats.jsonl`"
         "), val / test PSNR (CPU threads; ? = not recorded). Only a one-thread CPU run is bit-reproducible.",
-        "",
-        "| scene | protocol | method | setting | seed | read above | other run | what the other run was |",
-        "|---|---|---|---|---|---|---|---|",
-        *lines,
-        "",
-    ]
+        ["scene", "protocol", "method", "setting", "seed", "read above", "other run", "what the other run was"],
+        lines,
+    )
 
 
 def comparable_seconds(rows: dict[str, list[dict]]) -> str:
@@ -259,14 +239,14 @@ def recording_machines(rows: Iterable[dict]) -> str:
 
 def protocols_table(suite: Suite) -> list[str]:
     scenes = {"lego": lambda p: f"{400 // p.lego_downscale}×{400 // p.lego_downscale}", "fern": lambda p: "504×378"}
-    lines = ["| protocol | iterations | rays | grid | lego image | fern image |", "|---|---|---|---|---|---|"]
+    lines = []
     for p in suite.protocols.values():
         cells = [scenes[s](p) if s in p.scenes else "—" for s in ("lego", "fern")]
         lines.append(f"| {p.name} | {p.iters} | {p.rays} | {p.grid[0]}³ → {p.grid[1]}³ | {' | '.join(cells)} |")
-    return [*lines, ""]
+    return [*table(["protocol", "iterations", "rays", "grid", "lego image", "fern image"], lines), ""]
 
 
-def report(results: dict[str, dict], repeats: Sequence[dict], suite: Suite = SUITE) -> list[str]:
+def quality_section(results: dict[str, dict], repeats: Sequence[dict], suite: Suite = SUITE) -> list[str]:
     seeds = suite.seeds
     views = "; ".join(f"{scene}: {s['views']}" for scene, s in suite.scenes.items())
     body = section_head(
@@ -283,11 +263,7 @@ def report(results: dict[str, dict], repeats: Sequence[dict], suite: Suite = SUI
         machine=recording_machines(results.values()),
     )
     body += protocols_table(suite)
-    summary = [
-        "| scene | protocol | device | fourierf-vm: setting, test PSNR (seeds) | tensorf-vm: setting, test PSNR (seeds)"
-        " | gap | CPU threads | train s (f / t) |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
+    summary: list[str] = []
     sweeps: list[str] = []
     for scene in suite.settings:
         for p in suite.protocols:
@@ -308,7 +284,8 @@ def report(results: dict[str, dict], repeats: Sequence[dict], suite: Suite = SUI
                 vals = [val_cell(tables[m][s], seeds) if s in tables[m] else "—" for m in (F, T)]
                 if vals != ["—", "—"]:
                     sweeps.append(f"| {scene} | {p} | {s} | " + " | ".join(vals) + " |")
-    body += [*summary, ""]
+    picks = [f"{m}: setting, test PSNR (seeds)" for m in (F, T)]
+    body += [*table(["scene", "protocol", "device", *picks, "gap", "CPU threads", "train s (f / t)"], summary), ""]
     body += targets_table(results, suite)
     body += mid_along_the_budget(results, suite)
     body += rule_along_the_budget(results, suite)
@@ -320,9 +297,7 @@ def report(results: dict[str, dict], repeats: Sequence[dict], suite: Suite = SUI
         "they were run, or over the seeds named where only some were (the choice above is the best all-seed mean of "
         "each column, else its best first seed):",
         "",
-        "| scene | protocol | setting | fourierf-vm val | tensorf-vm val |",
-        "|---|---|---|---|---|",
-        *sweeps,
+        *table(["scene", "protocol", "setting", f"{F} val", f"{T} val"], sweeps),
         "",
     ]
     for grid in suite.grids:
@@ -341,21 +316,313 @@ def report(results: dict[str, dict], repeats: Sequence[dict], suite: Suite = SUI
     return body
 
 
+# -- equal time and equal iterations: each point a user's run (run.py equal-time / equal-iterations) ---------------
+FIGURE = "docs/equal_time.svg"
+TIME_COMMAND = "python benchmarks/run.py equal-time --jobs 2, then python benchmarks/report.py"
+ITERATIONS_COMMAND = (
+    "python benchmarks/run.py equal-iterations --scene lego fern --jobs 2, then python benchmarks/report.py"
+)
+ITERATIONS_TITLE = "Equal iterations: the paper's systems at the default CPU run"
+PAPER, BASELINE = "fourierf-vm-paper", "tensorf-vm-published"
+ALPHA, NO_ALPHA = "zerorf-vm", "zerorf-vm-no-alpha"
+COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#17becf", "#7f7f7f")
+
+
+def stage_head(rows: Sequence[dict], title: str, command: str, settings: str) -> list[str]:
+    """An equal-time or equal-iterations section's opening lines, naming the machines its rows ran on."""
+    machines = "; ".join(sorted({r["machine"] for r in rows})) or "none yet"
+    return section_head(title, command, settings, machine=f"{machines}, one thread a run")
+
+
+def lego_side(suite: Suite) -> int:
+    """The side of lego's images in the equal-time stage (Blender's are 400×400)."""
+    return 400 // suite.protocols[suite.equal_time["protocol"]].lego_downscale
+
+
+def timed(rows: Sequence[dict], scene: str, method: str) -> list[dict]:
+    """The rows of a method on a scene that trained (not too short), by training time."""
+    found = [r for r in rows if (r["scene"], r["method"]) == (scene, method) and "too_short" not in r]
+    return sorted(found, key=lambda r: r["trained_seconds"])
+
+
+def metrics_cell(rows: Sequence[dict], scene: str, method: str, budget: str) -> str:
+    row = next((r for r in rows if (r["scene"], r["method"], r["budget"]) == (scene, method, budget)), None)
+    if row is None:
+        return "—"
+    if "too_short" in row:
+        return "too short"
+    return f"{row['psnr']:.2f} / {row['ssim']:.3f} / {row['lpips']:.3f}"
+
+
+def time_to_psnr(points: Sequence[tuple[float, float]], target: float) -> tuple[float, bool] | None:
+    """Seconds to reach ``target`` PSNR along (seconds, PSNR) points sorted by time: linear in log time between the
+    last point below it and the first at or above it; (the first point's time, True) where that one already reaches it
+    (an upper bound), None where none does."""
+    for i, (seconds, psnr) in enumerate(points):
+        if psnr < target:
+            continue
+        if i == 0:
+            return seconds, True
+        (t0, p0), (t1, p1) = points[i - 1], points[i]
+        share = (target - p0) / (p1 - p0)
+        return math.exp(math.log(t0) + share * (math.log(t1) - math.log(t0))), False
+    return None
+
+
+def duration(seconds: float) -> str:
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    return f"{seconds / 60:.1f} min" if seconds < 5400 else f"{seconds / 3600:.1f} h"
+
+
+def time_cell(points: Sequence[tuple[float, float]], target: float) -> str:
+    found = time_to_psnr(points, target)
+    if found is None:
+        return "not reached"
+    return ("≤ " if found[1] else "") + duration(found[0])
+
+
+def seconds_per_iteration(rows: Sequence[dict], scene: str, method: str) -> tuple[float, bool] | None:
+    """A method's mean seconds per iteration on a scene over its trained points, else (True) over the trainer's
+    estimates in its too-short points; None without either."""
+    own = [r["seconds_per_iteration"] for r in timed(rows, scene, method)]
+    estimated = [
+        r["estimated_seconds_per_iteration"]
+        for r in rows
+        if (r["scene"], r["method"]) == (scene, method) and "estimated_seconds_per_iteration" in r
+    ]
+    values = own or estimated
+    return (sum(values) / len(values), not own) if values else None
+
+
+def speed_cell(rows: Sequence[dict], scene: str, method: str, baseline: str) -> str:
+    """A method's seconds per iteration over the baseline's on a scene; "est." where either is an estimate."""
+    own, base = (seconds_per_iteration(rows, scene, m) for m in (method, baseline))
+    if own is None or base is None:
+        return "—"
+    return f"{own[0] / base[0]:.2f}" + (" (est.)" if own[1] or base[1] else "")
+
+
+def budgets_of(rows: Sequence[dict], scene: str) -> list[str]:
+    found = {r["budget"]: r["budget_seconds"] for r in rows if r["scene"] == scene}
+    return sorted(found, key=found.__getitem__)
+
+
+def methods_of(rows: Sequence[dict], suite: Suite) -> list[str]:
+    """The suite's methods that have rows, in the suite's order, then any others the rows hold."""
+    listed = [m for m in suite.equal_time["methods"] if any(r["method"] == m for r in rows)]
+    return listed + sorted({r["method"] for r in rows} - set(listed))
+
+
+def scene_tables(rows: Sequence[dict], scene: str, suite: Suite) -> list[str]:
+    budgets, methods = budgets_of(rows, scene), methods_of([r for r in rows if r["scene"] == scene], suite)
+    targets = suite.equal_time["psnr_targets"].get(scene, [])
+    metrics = [md_row([m, *(metrics_cell(rows, scene, m, b) for b in budgets)]) for m in methods]
+    lines = [
+        f"### {scene}",
+        "",
+        "Test PSNR / SSIM / LPIPS at each budget (too short: the budget does not fit the method's fewest iterations):",
+        "",
+        *table(["method", *budgets], metrics),
+    ]
+    if targets:
+        points = {m: [(r["trained_seconds"], r["psnr"]) for r in timed(rows, scene, m)] for m in methods}
+        times = [md_row([m, *(time_cell(points[m], t) for t in targets)]) for m in methods]
+        lines += [
+            "",
+            "Training time to reach a test PSNR (interpolated on log time between budgets; ≤: reached at the first):",
+            "",
+            *table(["method", *(f"{t:.1f} dB" for t in targets)], times),
+        ]
+    return [*lines, ""]
+
+
+def speed_table(rows: Sequence[dict], suite: Suite) -> list[str]:
+    baseline, paper = suite.equal_time["baseline"], suite.equal_time["paper_time_ratio"]
+    scenes = [s for s in suite.equal_time["scenes"] if any(r["scene"] == s for r in rows)]
+    lines = [
+        md_row([m, *(speed_cell(rows, s, m, baseline) for s in scenes), paper.get(m, "—")])
+        for m in methods_of(rows, suite)
+    ]
+    return [
+        f"Seconds per iteration over {baseline}'s (mean over the budgets that trained; est.: from the trainer's "
+        "estimate where no budget fitted), beside the paper's Table 3:",
+        "",
+        *table(["method", *scenes, "paper"], lines),
+        "",
+    ]
+
+
+def stage_time(rows: Sequence[dict]) -> str:
+    """How long the stage took: its points' seconds (training, evaluation, start-up) summed, over the jobs at once."""
+    total, jobs = sum(r["seconds"] for r in rows), max(r["jobs"] for r in rows)
+    return f"The {len(rows)} points took {duration(total)} in all, about {duration(total / jobs)} at {jobs} at a time."
+
+
+def equal_time_section(rows: Sequence[dict], suite: Suite) -> list[str]:
+    side = lego_side(suite)
+    body = stage_head(
+        rows,
+        "Equal-time comparison",
+        TIME_COMMAND,
+        "Each point is a user's run: `fourierf-train METHOD --time-budget B --threads 1`, sized for the scene and "
+        "the machine, the short-run rules applying as they would, then `fourierf-eval` on the test views. Scenes "
+        f"and budgets: `[equal_time]` in `benchmarks/suite.toml`; lego at {side}×{side}. Times are training seconds "
+        "from each run's metrics (setup and evaluation not included).",
+    )
+    if not rows:
+        return [*body, "No points are recorded yet.", ""]
+    for scene in suite.equal_time["scenes"]:
+        if any(r["scene"] == scene for r in rows):
+            body += scene_tables(rows, scene, suite)
+    off = [r["trained_seconds"] / r["planned_seconds"] - 1 for r in rows if r.get("planned_seconds")]
+    if off:
+        spread = f"{min(off):+.0%}" + (f" to {max(off):+.0%}" if len(off) > 1 else "")
+        body += [f"Actual against planned training time: {spread} over the {len(off)} trained points.", ""]
+    body += speed_table(rows, suite)
+    body += [stage_time(rows), "", f"![test PSNR against training time, log axis]({FIGURE})", ""]
+    return body
+
+
+def figure(rows: Sequence[dict], suite: Suite) -> str:
+    """Test PSNR against training time (log axis), one panel a scene, one polyline a method with trained points."""
+    scenes, methods = list(suite.equal_time["scenes"]), methods_of(rows, suite)
+    width, height, left, top, plot_w, plot_h = 460, 330, 60, 30, 370, 240
+    total_w = width * len(scenes)
+    out = [
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{total_w}" height="{height + 24 * len(methods) + 10}" '
+        'font-family="sans-serif" font-size="12">',
+        f'<rect width="{total_w}" height="{height + 24 * len(methods) + 10}" fill="white"/>',
+    ]
+    for k, scene in enumerate(scenes):
+        x0, lines = k * width + left, {m: timed(rows, scene, m) for m in methods}
+        points = [r for found in lines.values() for r in found]
+        out.append(f'<text x="{x0 + plot_w / 2}" y="{top - 10}" text-anchor="middle">{escape(scene)}</text>')
+        out.append(f'<rect x="{x0}" y="{top}" width="{plot_w}" height="{plot_h}" fill="none" stroke="black"/>')
+        out.append(f'<text x="{x0 + plot_w / 2}" y="{top + plot_h + 36}" text-anchor="middle">'
+                   "training time (s, log axis)</text>")  # fmt: skip
+        out.append(f'<text x="{x0 - 42}" y="{top + plot_h / 2}" text-anchor="middle" '
+                   f'transform="rotate(-90 {x0 - 42} {top + plot_h / 2})">test PSNR (dB)</text>')  # fmt: skip
+        if not points:
+            out.append(f'<text x="{x0 + plot_w / 2}" y="{top + plot_h / 2}" text-anchor="middle">no points</text>')
+            continue
+        logs = [math.log10(r["trained_seconds"]) for r in points]
+        lo_t, hi_t = min(logs) - 0.1, max(logs) + 0.1
+        lo_p, hi_p = math.floor(min(r["psnr"] for r in points)) - 0.5, math.ceil(max(r["psnr"] for r in points)) + 0.5
+
+        def x(seconds: float, x0: float = x0, lo: float = lo_t, hi: float = hi_t) -> float:
+            return x0 + (math.log10(seconds) - lo) / (hi - lo) * plot_w
+
+        def y(psnr: float, lo: float = lo_p, hi: float = hi_p) -> float:
+            return top + (hi - psnr) / (hi - lo) * plot_h
+
+        for tick in (t for t in (10, 30, 60, 120, 300, 600, 1200, 1800, 3600, 7200) if lo_t <= math.log10(t) <= hi_t):
+            out.append(f'<text x="{x(tick):.1f}" y="{top + plot_h + 16}" text-anchor="middle">{tick}</text>')
+        for tick in range(math.ceil(lo_p), math.floor(hi_p) + 1):
+            out.append(f'<text x="{x0 - 6}" y="{y(tick) + 4:.1f}" text-anchor="end">{tick}</text>')
+        for i, (m, found) in enumerate(lines.items()):
+            if found:
+                xy = " ".join(f"{x(r['trained_seconds']):.1f},{y(r['psnr']):.1f}" for r in found)
+                colour = COLOURS[i % len(COLOURS)]
+                out.append(f'<polyline points="{xy}" fill="none" stroke="{colour}" stroke-width="2" '
+                           f'data-method="{escape(m)}" data-scene="{escape(scene)}"/>')  # fmt: skip
+                out += [f'<circle cx="{v.split(",")[0]}" cy="{v.split(",")[1]}" r="3" fill="{colour}"/>'
+                        for v in xy.split()]  # fmt: skip
+    for i, m in enumerate(methods):
+        y_legend = height + 24 * i
+        out.append(f'<line x1="{left}" y1="{y_legend}" x2="{left + 30}" y2="{y_legend}" '
+                   f'stroke="{COLOURS[i % len(COLOURS)]}" stroke-width="2"/>')  # fmt: skip
+        out.append(f'<text x="{left + 38}" y="{y_legend + 4}">{escape(m)}</text>')
+    return "\n".join([*out, "</svg>", ""])
+
+
+def counted(rows: Sequence[dict], scene: str, method: str) -> list[dict]:
+    """The trained rows of a method (or variant) on a scene, most iterations first."""
+    found = [r for r in rows if (r["scene"], r["method"]) == (scene, method) and "psnr" in r]
+    return sorted(found, key=lambda r: -r["iterations"])
+
+
+def gap(rows: Sequence[dict], scene: str, ahead: str, behind: str) -> tuple[float, int] | None:
+    """Test PSNR of ``ahead`` minus ``behind`` on a scene in dB at the most iterations both ran (and those
+    iterations), or None where they share no budget."""
+    for first in counted(rows, scene, ahead):
+        second = next((r for r in counted(rows, scene, behind) if r["budget"] == first["budget"]), None)
+        if second is not None:
+            return first["psnr"] - second["psnr"], first["iterations"]
+    return None
+
+
+def db(found: tuple[float, int] | None) -> str:
+    return "not run at equal iterations" if found is None else f"{found[0]:+.2f} dB at {found[1]} iterations"
+
+
+def iterations_table(rows: Sequence[dict], scene: str, methods: Sequence[str]) -> list[str]:
+    lines = [f"### {scene}", "", *table(["method", "test PSNR", "SSIM", "LPIPS", "iterations", "training s",
+                                         "s/iteration"], [])]  # fmt: skip
+    for method in methods:
+        found = counted(rows, scene, method)
+        lines += [
+            f"| {method} | {row['psnr']:.2f} | {row['ssim']:.3f} | {row['lpips']:.3f} | {row['iterations']} | "
+            f"{row['trained_seconds']:.0f} | {row['seconds_per_iteration']:.2f} |"
+            for row in found
+        ] or [f"| {method} | not run | | | | | |"]
+    return [*lines, ""]
+
+
+def derived_lines(rows: Sequence[dict], suite: Suite) -> list[str]:
+    """FourieRF (paper) over TensoRF (published) on each scene beside the paper's gap; ZeroRF's alpha term on lego."""
+    paper_gap = suite.equal_time["iterations"]["paper_gap"]
+    gaps = [
+        f"{scene} {db(gap(rows, scene, PAPER, BASELINE))} (paper at full scale: {paper_gap[scene]:+.1f} dB)"
+        for scene in suite.equal_time["scenes"]
+    ]
+    return [
+        f"- {PAPER} minus {BASELINE}, test PSNR: " + "; ".join(gaps) + ".",
+        f"- {ALPHA} with minus without its alpha term ({NO_ALPHA}) on lego: {db(gap(rows, 'lego', ALPHA, NO_ALPHA))}.",
+        "",
+    ]
+
+
+def equal_iterations_section(rows: Sequence[dict], suite: Suite) -> list[str]:
+    stage, side = suite.equal_time["iterations"], lego_side(suite)
+    body = stage_head(
+        rows,
+        ITERATIONS_TITLE,
+        ITERATIONS_COMMAND,
+        f"Each point is a user's run at {stage['budget'].removesuffix('it')} iterations: `fourierf-train METHOD "
+        "--max-num-iterations N --threads 1` with no size flag (sized as the default CPU run, the short-run rules "
+        f"applying as they would), then `fourierf-eval` on the test views; lego at {side}×{side}. {NO_ALPHA} is "
+        "zerorf-vm with `--pipeline.model.alpha-weight 0`, on lego only (fern's images carry no alpha). freenerf is "
+        "left out: at over ten seconds an iteration on this CPU, the budget takes hours; the equal-time section "
+        "covers it. A method too slow for that budget here runs a shorter one (`--budget Nit`), the iterations "
+        "column saying which; each derived line compares rows of equal iterations only. Training seconds come from "
+        "a shared, loaded machine (other work ran beside these points); the equal-time section has the "
+        "quiet-machine speeds.",
+    )
+    if not rows:
+        return [*body, "No points are recorded yet.", ""]
+    for scene in suite.equal_time["scenes"]:
+        variants = stage.get("variants", {})
+        methods = [m for m in stage["methods"] if scene in variants.get(m, {}).get("scenes", [scene])]
+        body += iterations_table(rows, scene, methods)
+    return [*body, *derived_lines(rows, suite)]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--results", type=Path, default=QUALITY_RESULTS, help="the rows run.py recorded")
     ap.add_argument("--equal-time", type=Path, default=EQUAL_TIME_RESULTS, help="the equal-time stage's rows")
     ap.add_argument("--equal-iterations", type=Path, default=EQUAL_ITERATIONS_RESULTS, help="that stage's rows")
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")
-    ap.add_argument("--figure", type=Path, default=REPO / et.FIGURE, help="the equal-time figure (SVG)")
+    ap.add_argument("--figure", type=Path, default=REPO / FIGURE, help="the equal-time figure (SVG)")
     args = ap.parse_args()
-    body = report(load_results(args.results), read_repeats(args.results.with_name(REPEATS)))
-    print(update_benchmarks_md(args.markdown, BEGIN, END, body))
-    timed = list(load_results(args.equal_time).values())
-    print(update_benchmarks_md(args.markdown, et.BEGIN, et.END, et.section(timed, SUITE)))
-    args.figure.write_text(et.figure(timed, SUITE))
-    counted = list(load_results(args.equal_iterations).values())
-    print(update_benchmarks_md(args.markdown, ei.BEGIN, ei.END, ei.section(counted, SUITE)))
+    body = quality_section(load_results(args.results), read_jsonl(args.results.with_name(REPEATS)))
+    print(update_benchmarks_md(args.markdown, *QUALITY, body))
+    timed_rows = list(load_results(args.equal_time).values())
+    print(update_benchmarks_md(args.markdown, *TIMED, equal_time_section(timed_rows, SUITE)))
+    args.figure.write_text(figure(timed_rows, SUITE))
+    counted_rows = list(load_results(args.equal_iterations).values())
+    print(update_benchmarks_md(args.markdown, *COUNTED, equal_iterations_section(counted_rows, SUITE)))
 
 
 if __name__ == "__main__":

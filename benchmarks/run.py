@@ -32,6 +32,7 @@ from pathlib import Path
 
 import equal_time
 from harness import (
+    EQUAL_ITERATIONS_RESULTS,
     EQUAL_TIME_RESULTS,
     QUALITY_RESULTS,
     REPEATS,
@@ -294,7 +295,7 @@ def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argpa
     timed = args.stage == "equal-time"
     folder = {"equal-time": "bench_equal_time", "equal-iterations": "bench_equal_iterations"}.get(args.stage)
     args.work = args.work or REPO / "outputs" / (folder or "bench_quality")
-    results = {"equal-time": EQUAL_TIME_RESULTS, "equal-iterations": equal_time.EQUAL_ITERATIONS_RESULTS}
+    results = {"equal-time": EQUAL_TIME_RESULTS, "equal-iterations": EQUAL_ITERATIONS_RESULTS}
     args.results = args.results or results.get(args.stage, QUALITY_RESULTS)
     counted = args.stage == "equal-iterations"
     if args.budget is not None and not (timed or counted):

@@ -7,10 +7,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-import equal_iterations_report as rep
 import equal_time
 import harness
 import pytest
+import report as rep
 
 from tests.benchmarks.test_equal_time import fake_runs  # noqa: F401 (a fixture)
 
@@ -99,20 +99,20 @@ def test_a_gap_compares_rows_of_equal_iterations_only() -> None:
     assert rep.gap(both, "lego", "zerorf-vm", "zerorf-vm-no-alpha") == (pytest.approx(0.5), 800)
     apart = [_row("fern", "fourierf-vm-paper", 18.0, 800), _row("fern", "tensorf-vm-published", 18.5, 150)]
     assert rep.gap(apart, "fern", "fourierf-vm-paper", "tensorf-vm-published") is None
-    table = rep.scene_table(longer, "lego", ["zerorf-vm"])
+    table = rep.iterations_table(longer, "lego", ["zerorf-vm"])
     assert [line.split(" | ")[4] for line in table if line.startswith("| zerorf-vm |")] == ["800", "150"]
 
 
 def test_the_section_has_a_table_per_scene_and_says_what_is_missing() -> None:
-    lines = rep.section(ROWS, SUITE)
+    lines = rep.equal_iterations_section(ROWS, SUITE)
     text = "\n".join(lines)
-    assert lines[0] == f"## {rep.TITLE}" and "freenerf is left out" in text and "loaded machine" in text
+    assert lines[0] == f"## {rep.ITERATIONS_TITLE}" and "freenerf is left out" in text and "loaded machine" in text
     assert "| fourierf-vm-paper | 21.50 | 0.800 | 0.200 | 800 | 400 | 0.50 |" in lines
     assert "| zerorf-vm-no-alpha | 18.75 | 0.800 | 0.200 | 150 | 75 | 0.50 |" in lines
     assert "| zerorf-vm | not run | | | | | |" in lines  # fern's zerorf-vm: no row
     fern = lines[lines.index("### fern") :]
     assert not any(line.startswith("| zerorf-vm-no-alpha") for line in fern)  # the variant runs on lego only
-    assert "No points" in "\n".join(rep.section([], SUITE))
+    assert "No points" in "\n".join(rep.equal_iterations_section([], SUITE))
 
 
 def test_a_method_outside_the_stage_is_one_clear_error(tmp_path: Path) -> None:

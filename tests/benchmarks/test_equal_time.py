@@ -12,9 +12,9 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import equal_time
-import equal_time_report as rep
 import harness
 import pytest
+import report as rep
 
 SUITE = harness.load_suite()
 SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "run.py"
@@ -32,7 +32,8 @@ def _row(scene: str, method: str, budget: str, seconds: float, psnr: float, spi:
 def _too_short(scene: str, method: str, budget: str) -> dict:
     row = _row(scene, method, budget, 1.0, 0.0)
     return {k: row[k] for k in ("key", "scene", "method", "budget", "budget_seconds", "threads", "jobs", "machine")} | {
-        "too_short": "--time-budget 1m is too short for this run", "seconds": 40.0,
+        "too_short": "--time-budget 1m is too short for this run",
+        "seconds": 40.0,
     }
 
 
@@ -148,11 +149,11 @@ def test_speed_is_relative_to_the_published_tensorf_beside_the_papers_ratio() ->
 
 
 def test_the_section_states_its_command_and_how_long_the_stage_took() -> None:
-    text = "\n".join(rep.section(ROWS, SUITE))
+    text = "\n".join(rep.equal_time_section(ROWS, SUITE))
     assert "Command: `python benchmarks/run.py equal-time" in text and rep.FIGURE in text
     total = sum(r["seconds"] for r in ROWS)
     assert f"The {len(ROWS)} points took {rep.duration(total)} in all, about {rep.duration(total / 2)} at 2" in text
-    assert "No points" in "\n".join(rep.section([], SUITE))
+    assert "No points" in "\n".join(rep.equal_time_section([], SUITE))
 
 
 def test_the_figure_is_svg_with_one_line_per_method_per_scene() -> None:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import harness
 import pytest
-from harness import chosen_setting, load_results, read_repeats, rows_by, setting_flags
+from harness import chosen_setting, load_results, read_jsonl, rows_by, setting_flags
 
 from tests.helpers import load_benchmark
 
@@ -332,12 +332,12 @@ def test_a_run_again_moves_the_earlier_row_to_the_repeats_with_its_note(tmp_path
     results = load_results(path)
     assert results == {first["key"]: rerun, other["key"]: other}  # one row a key, the latest
     assert len(path.read_text().splitlines()) == 2
-    repeats = read_repeats(path.with_name(harness.REPEATS))
+    repeats = read_jsonl(path.with_name(harness.REPEATS))
     assert repeats == [first | {"repeat": "threads not recorded"}]  # nothing recorded is lost
     runner.record(path, rerun | {"val_psnr": 21.6}, again="a second rerun")
-    assert [r["val_psnr"] for r in read_repeats(path.with_name(harness.REPEATS))] == [21.0, 21.5]
+    assert [r["val_psnr"] for r in read_jsonl(path.with_name(harness.REPEATS))] == [21.0, 21.5]
     runner.record(path, _row("tv8", 1, val=19.0, test=18.0), again="nothing earlier")  # a new key: nothing moves
-    assert len(read_repeats(path.with_name(harness.REPEATS))) == 2
+    assert len(read_jsonl(path.with_name(harness.REPEATS))) == 2
 
 
 def test_the_threads_cell_says_which_cpu_rows_are_reproducible() -> None:
@@ -386,7 +386,7 @@ def test_run_all_skips_recorded_runs_unless_run_again(tmp_path: Path, monkeypatc
     again = argparse.Namespace(**{**vars(args), "again": "threads not recorded"})
     runner.run_all([runner.quality_job(point, again)], again)
     assert ran == [run.key] and load_results(path)[f"lego/{run.key}"]["val_psnr"] == 21.5
-    assert [r["repeat"] for r in read_repeats(path.with_name(harness.REPEATS))] == ["threads not recorded"]
+    assert [r["repeat"] for r in read_jsonl(path.with_name(harness.REPEATS))] == ["threads not recorded"]
 
 
 def test_merge_records_rows_run_elsewhere_as_a_run_would(tmp_path: Path) -> None:
@@ -401,7 +401,7 @@ def test_merge_records_rows_run_elsewhere_as_a_run_would(tmp_path: Path) -> None
     lines = runner.merge(path, [lane], again="threads not recorded")
     assert lines[0] == f"{rerun['key']}: val 21.50  test 20.50  (threads 1)"
     assert load_results(path)[rerun["key"]] == rerun
-    repeats = read_repeats(path.with_name(harness.REPEATS))
+    repeats = read_jsonl(path.with_name(harness.REPEATS))
     assert [(r["key"], r["val_psnr"], r["repeat"]) for r in repeats] == [
         (rerun["key"], 21.0, "threads not recorded"),
         (new["key"], 20.0, "threads not recorded"),  # merged twice: the first merge's row is kept, not lost

@@ -21,6 +21,7 @@ from fourierf_plugin.utils.colormaps import to_uint8
 from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.utils.lpips import LPIPS
 from fourierf_plugin.utils.metrics import mean_and_std, psnr, ssim
+from fourierf_plugin.utils.new_dirs import NewDirs
 from fourierf_plugin.utils.os_errors import user_error_for
 
 METRICS = ("psnr", "ssim", "lpips")
@@ -61,18 +62,21 @@ def evaluate(
 
     The PNGs are written into a hidden sibling folder made for this call and renamed to ``render_dir`` when every
     view is done, so a ``render_dir`` always holds a complete set; an existing non-empty one is replaced only with
-    ``overwrite`` (``check_render_dir``), and the sibling is removed if the evaluation stops. Returns the report
-    ``fourierf-eval`` writes: per-image and mean metrics, the checkpoint, timings.
+    ``overwrite`` (``check_render_dir``), and if the evaluation stops the sibling is removed, with any parent folder
+    this call created and left empty. Returns the report ``fourierf-eval`` writes: per-image and mean metrics, the
+    checkpoint, timings.
     """
     if render_dir is not None:
         check_render_dir(render_dir, overwrite)
     started = time.perf_counter()
     partial = None
+    made = NewDirs()  # the parents of render_dir this call creates: removed again, if left empty, when it stops
     if render_dir is not None:
+        made.make(render_dir.parent, "--render-dir")
         try:
-            render_dir.parent.mkdir(parents=True, exist_ok=True)
             partial = Path(tempfile.mkdtemp(prefix=f".{render_dir.name}.", suffix=".partial", dir=render_dir.parent))
         except OSError as err:
+            made.remove_empty()
             fail(f"cannot write to {render_dir.parent} ({err.strerror or err})", "choose a writable --render-dir")
     try:
         per_image = _score_views(run, split, lpips, partial, on_view)
@@ -81,6 +85,7 @@ def evaluate(
     except BaseException as err:
         if partial is not None:
             shutil.rmtree(partial, ignore_errors=True)  # made by this call: a half-filled folder helps no one
+        made.remove_empty()
         problem = user_error_for(err, path=render_dir) if isinstance(err, Exception) else None
         if problem is not None:
             raise problem from err

@@ -19,6 +19,7 @@ from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.utils.files import check_writable_dir, run_renders_dir
 from fourierf_plugin.utils.interrupt import note_kept, stop_cleanly
 from fourierf_plugin.utils.lpips import LPIPS, default_lpips_weights
+from fourierf_plugin.utils.new_dirs import NewDirs
 
 
 @dataclass
@@ -48,48 +49,50 @@ def skips_renders(path: Path | None) -> bool:
     return path is not None and str(path).lower() == "none"
 
 
-def check_outputs(cfg: EvalConfig) -> None:
-    """Before any work: the report and the renders can be written, and replace nothing without --overwrite."""
+def check_outputs(cfg: EvalConfig, made: NewDirs) -> None:
+    """Before any work: the report and the renders can be written, and replace nothing without --overwrite; the
+    folders created for them are recorded in ``made``."""
     out = cfg.output_path
     if out.is_dir():
         fail(f"--output-path {out} is a folder", "name the report file, e.g. --output-path eval.json")
     if out.exists() and not cfg.overwrite:
         fail(f"--output-path {out} already exists", "choose another --output-path, or pass --overwrite to replace it")
-    check_writable_dir(out.parent, "--output-path")
-    if cfg.render_dir is not None and not skips_renders(cfg.render_dir):
-        check_render_dir(cfg.render_dir, cfg.overwrite, keep=(Path.cwd(), out, Path(cfg.load_config)))
-        check_writable_dir(cfg.render_dir.parent, "--render-dir")
+    renders = cfg.render_dir if cfg.render_dir is not None and not skips_renders(cfg.render_dir) else None
+    if renders is not None:
+        check_render_dir(renders, cfg.overwrite, keep=(Path.cwd(), out, Path(cfg.load_config)))
+    check_writable_dir(made.make(out.parent, "--output-path"), "--output-path")
+    if renders is not None:
+        check_writable_dir(made.make(renders.parent, "--render-dir"), "--render-dir")
 
 
 def run_eval(cfg: EvalConfig) -> dict:
     console = get_console()
-    check_outputs(cfg)
-    locks = [lock_output(cfg.output_path, "--output-path")]  # a second evaluation into the same report stops here
-    claimed = None
-    try:
-        run = cfg.load_run()
-        weights = cfg.lpips_weights or default_lpips_weights()
-        lpips = LPIPS(weights).to(run.device) if weights is not None else None
-        if lpips is None:
-            warn("LPIPS weights not found; LPIPS is skipped (pass --lpips-weights PATH to include it)")
-        render_dir = cfg.render_dir
-        if render_dir is None:  # created now, so an evaluation started beside this one takes the next free folder
-            render_dir = run_renders_dir(run.run_dir, cfg.split, run.step, cfg.overwrite, claim=not cfg.overwrite)
-            claimed = None if cfg.overwrite else render_dir
-        renders = None if skips_renders(render_dir) else render_dir
-        if renders is not None:
-            renders.parent.mkdir(parents=True, exist_ok=True)  # RUN/renders/ on a first --overwrite evaluation
-            locks.append(lock_output(renders, "--render-dir"))
-        report = evaluate(run, cfg.split, lpips, renders, print_view, cfg.overwrite)
-        if renders is not None:
-            note_kept(renders)
-        write_json(cfg.output_path, report)
-        note_kept(cfg.output_path)
-    finally:
-        if claimed is not None and claimed.is_dir() and not any(claimed.iterdir()):
-            claimed.rmdir()  # claimed by this call and never filled
-        for lock in locks:
-            lock.release()
+    with NewDirs() as made:  # a stopped evaluation removes the folders it made and left empty, and only those
+        check_outputs(cfg, made)
+        locks = [lock_output(cfg.output_path, "--output-path")]  # a second evaluation into one report stops here
+        try:
+            run = cfg.load_run()
+            weights = cfg.lpips_weights or default_lpips_weights()
+            lpips = LPIPS(weights).to(run.device) if weights is not None else None
+            if lpips is None:
+                warn("LPIPS weights not found; LPIPS is skipped (pass --lpips-weights PATH to include it)")
+            render_dir = cfg.render_dir
+            if render_dir is None:  # created now, so an evaluation started beside this one takes the next free folder
+                made.make(run.run_dir / "renders", "--render-dir")
+                render_dir = run_renders_dir(run.run_dir, cfg.split, run.step, cfg.overwrite, claim=not cfg.overwrite)
+                if not cfg.overwrite:
+                    made.adopt(render_dir)
+            renders = None if skips_renders(render_dir) else render_dir
+            if renders is not None:
+                locks.append(lock_output(renders, "--render-dir"))
+            report = evaluate(run, cfg.split, lpips, renders, print_view, cfg.overwrite)
+            if renders is not None:
+                note_kept(renders)
+            write_json(cfg.output_path, report)
+            note_kept(cfg.output_path)
+        finally:
+            for lock in locks:  # before the folders go: a lock file lives beside its output
+                lock.release()
     results = report["results"]
     summary = f"psnr {results['psnr']:.2f}  ssim {results['ssim']:.4f}"
     if results["lpips"] is not None:

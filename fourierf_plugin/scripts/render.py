@@ -9,7 +9,8 @@ picks an orbit when the training cameras surround the scene and the interpolated
 is only shown from where it was photographed. Every requested output (rgb, depth coloured by a perceptual colormap,
 accumulation) is written as ``DIR/<output>/<frame>.png`` plus ``DIR/<output>.gif`` (and ``.mp4`` when the optional
 imageio-ffmpeg plugin is installed). Nothing already in a named ``--output-dir`` is replaced without
-``--overwrite``, and outputs are written beside their final names first and renamed into place when complete.
+``--overwrite``, outputs are written beside their final names first and renamed into place when complete, and a
+folder another live render is writing is refused (``RENDER_LOCK``).
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ from fourierf_plugin.cameras.cameras import Cameras
 from fourierf_plugin.data.datamanager import camera_rays
 from fourierf_plugin.data.dataparser_base import DataparserOutputs
 from fourierf_plugin.engine.loading import LoadedRun
-from fourierf_plugin.engine.run_dir import unique_safe_name
+from fourierf_plugin.engine.run_dir import RunLock, hold_lock, unique_safe_name
 from fourierf_plugin.scripts.cli import run_cli, strip_verbose
 from fourierf_plugin.scripts.run_options import RunOptions
 from fourierf_plugin.utils.colormaps import Colormap, colorize_accumulation, colorize_depth, depth_range, to_uint8
@@ -55,6 +56,7 @@ from fourierf_plugin.utils.errors import UserError, fail
 from fourierf_plugin.utils.files import run_renders_dir
 from fourierf_plugin.utils.interrupt import note_kept, stop_cleanly
 from fourierf_plugin.utils.memory import available_memory, check_fits
+from fourierf_plugin.utils.new_dirs import NewDirs
 from fourierf_plugin.utils.os_errors import user_error_for
 
 OUTPUT_NAMES = ("rgb", "depth", "accumulation")
@@ -285,13 +287,7 @@ def validate(cfg: RenderConfig) -> list[str]:
     if cfg.output_dir is not None and cfg.output_dir.exists() and not cfg.output_dir.is_dir():
         fail(f"--output-dir {cfg.output_dir} is an existing file", "choose a directory path")
     if cfg.output_dir is not None and not cfg.overwrite:
-        taken = existing_outputs(cfg.output_dir, outputs)
-        if taken:
-            fail(
-                f"--output-dir {cfg.output_dir} already holds {', '.join(p.name for p in taken)} from an earlier "
-                "render",
-                "choose another --output-dir, or pass --overwrite to replace them",
-            )
+        _refuse_taken(cfg.output_dir, outputs)
     if not Path(cfg.load_config).exists():
         fail(
             f"config file not found: {cfg.load_config}",
@@ -448,6 +444,48 @@ def existing_outputs(output_dir: Path, outputs: list[str]) -> list[Path]:
     return taken
 
 
+def _refuse_taken(output_dir: Path, outputs: list[str]) -> None:
+    """A UserError when ``output_dir`` already holds one of ``outputs`` (replaced only with --overwrite)."""
+    taken = existing_outputs(output_dir, outputs)
+    if taken:
+        fail(
+            f"--output-dir {output_dir} already holds {', '.join(p.name for p in taken)} from an earlier render",
+            "choose another --output-dir, or pass --overwrite to replace them",
+        )
+
+
+def _output_dir(cfg: RenderConfig, run: LoadedRun, mode: str, made: NewDirs) -> Path:
+    """--output-dir, created if needed; by default a fresh RUN/renders/<mode>-step<N>[-k]/ claimed by creating it (so
+    renders started together never share one), or with --overwrite that folder again. Folders made go in ``made``."""
+    if cfg.output_dir is not None:
+        return made.make(cfg.output_dir, "--output-dir")
+    made.make(run.run_dir / "renders", "--output-dir")
+    if cfg.overwrite:
+        return made.make(run_renders_dir(run.run_dir, mode, run.step, overwrite=True), "--output-dir")
+    claimed = run_renders_dir(run.run_dir, mode, run.step, overwrite=False, claim=True)
+    made.adopt(claimed)
+    return claimed
+
+
+RENDER_LOCK = ".fourierf-render.lock"
+"""The lock file a render holds inside its output folder while it writes there (inside, not beside: ``.`` and ``/``
+have no name to put one beside)."""
+
+
+def lock_render_dir(output_dir: Path) -> RunLock:
+    """Take ``RENDER_LOCK`` in ``output_dir`` for this process: a folder another live render is writing is a clear
+    error naming its PID (two renders would replace each other's frames); the lock of a process that is gone is taken
+    over."""
+
+    def busy(who: str, pid: int | None) -> UserError:
+        return UserError(
+            f"--output-dir {output_dir} is being written by {who} (another fourierf-render)",
+            fix=f"wait for it to finish{f' (or stop it: kill {pid})' if pid else ''}, or choose another --output-dir",
+        )
+
+    return hold_lock(Path(output_dir) / RENDER_LOCK, busy)
+
+
 def _staging(final: Path) -> Path:
     """A hidden sibling of ``final`` that the work is written to before it is renamed into place."""
     return final.with_name(f".{final.name}.partial-{os.getpid()}{final.suffix}")
@@ -543,26 +581,30 @@ def render(cfg: RenderConfig) -> RenderResult:
     cameras, stems, mode = build_cameras(cfg, run)
     cameras = scale_cameras(cameras, cfg.resolution_scale)
     check_frame_fits(cameras.width, cameras.height, cfg.resolution_scale)
-    output_dir = cfg.output_dir or run_renders_dir(run.run_dir, mode, run.step, cfg.overwrite)
-    _mkdir(output_dir)
-    staged = {name: _staging(output_dir / name) for name in outputs}
-    try:
-        for folder in staged.values():
-            shutil.rmtree(folder, ignore_errors=True)
-            _mkdir(folder)
-        result = _render_frames(cfg, run, cameras, stems, mode, outputs, staged, output_dir)
-        for name in outputs:
-            _commit_dir(staged[name], output_dir / name)
-            note_kept(output_dir / name)
-            result.frames[name] = [output_dir / name / p.name for p in result.frames[name]]
-    except OSError as err:
-        problem = user_error_for(err, path=output_dir)
-        if problem is None:
-            raise
-        raise problem from err
-    finally:
-        for folder in staged.values():
-            shutil.rmtree(folder, ignore_errors=True)
+    with NewDirs() as made:  # a stopped render removes the folders it made and left empty, and only those
+        output_dir = _output_dir(cfg, run, mode, made)
+        lock = lock_render_dir(output_dir)
+        staged = {name: _staging(output_dir / name) for name in outputs}
+        try:
+            if not cfg.overwrite:  # checked again under the lock: a render that just finished may have filled it
+                _refuse_taken(output_dir, outputs)
+            for folder in staged.values():
+                shutil.rmtree(folder, ignore_errors=True)
+                _mkdir(folder)
+            result = _render_frames(cfg, run, cameras, stems, mode, outputs, staged, output_dir)
+            for name in outputs:
+                _commit_dir(staged[name], output_dir / name)
+                note_kept(output_dir / name)
+                result.frames[name] = [output_dir / name / p.name for p in result.frames[name]]
+        except OSError as err:
+            problem = user_error_for(err, path=output_dir)
+            if problem is None:
+                raise
+            raise problem from err
+        finally:
+            for folder in staged.values():
+                shutil.rmtree(folder, ignore_errors=True)
+            lock.release()
 
     for name in outputs:
         console.print(f"  {name}: {len(result.frames[name])} frames in {escape(str(output_dir / name))}/")

@@ -57,3 +57,17 @@ def test_an_evaluation_never_removes_a_folder_it_did_not_make(run: LoadedRun, tm
     (theirs / "notes.txt").write_text("keep")
     evaluate(run, "test", render_dir=tmp_path / "renders")
     assert (theirs / "notes.txt").read_text() == "keep"
+
+
+def test_a_stopped_evaluation_removes_the_parent_folders_it_made_and_keeps_the_users(
+    run: LoadedRun, tmp_path: Path
+) -> None:
+    (tmp_path / "mine").mkdir()
+
+    def stop(item: dict) -> None:
+        raise KeyboardInterrupt
+
+    for render_dir in (tmp_path / "new" / "deeper" / "renders", tmp_path / "mine" / "renders"):
+        with pytest.raises(KeyboardInterrupt):
+            evaluate(run, "test", render_dir=render_dir, on_view=stop)
+    assert [p.name for p in tmp_path.rglob("*")] == ["mine"], "an empty folder of the user's stays"

@@ -4,12 +4,15 @@ without ``--overwrite``, ``--render-dir ..`` is refused even with it, and render
 from __future__ import annotations
 
 import json
+import shutil
+import signal
 from pathlib import Path
 
 import pytest
 
 from fourierf_plugin.scripts import eval as eval_script
 from fourierf_plugin.scripts.cli import EXIT_USER_ERROR
+from fourierf_plugin.utils.interrupt import Interrupted
 from tests.helpers import TINY_TEST_VIEWS, cli_exit_code, train_tiny
 
 
@@ -86,3 +89,36 @@ def test_the_default_render_folder_of_an_earlier_evaluation_is_kept(config: Path
     assert Path(first["render_dir"]).is_dir() and Path(second["render_dir"]).is_dir()
     assert first["render_dir"] != second["render_dir"]
     assert Path(second["render_dir"]).name == Path(first["render_dir"]).name + "-1"
+
+
+def every_path(root: Path) -> set[str]:
+    return {str(p.relative_to(root)) for p in root.rglob("*")}
+
+
+@pytest.mark.parametrize("where", ["default", "default --overwrite", "--render-dir"])
+def test_a_first_evaluation_stopped_mid_render_leaves_no_folder_it_made(
+    config: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, where: str
+) -> None:
+    """A run never evaluated (no RUN/renders/), stopped after its first view: the folders it made for the report and
+    the renders go, a user's empty folder stays, and the next evaluation takes the first render folder."""
+    run = Path(shutil.copytree(config.parent, tmp_path / "run", ignore=shutil.ignore_patterns("renders")))
+    (tmp_path / "mine").mkdir()
+    args = ["--load-config", str(run / "config.json"), "--output-path", str(tmp_path / "new" / "deeper" / "eval.json")]
+    args += {
+        "default": [],
+        "default --overwrite": ["--overwrite"],
+        "--render-dir": ["--render-dir", str(tmp_path / "mine" / "new" / "renders")],
+    }[where]
+    before = every_path(tmp_path)
+
+    def stop(item: dict) -> None:
+        raise Interrupted(signal.SIGTERM)  # what the stop-signal handler raises mid-work
+
+    monkeypatch.setattr(eval_script, "print_view", stop)
+    with pytest.raises(KeyboardInterrupt):
+        eval_script.main(args)
+    assert every_path(tmp_path) == before
+    monkeypatch.undo()
+    report = eval_script.main(args)
+    if where.startswith("default"):
+        assert Path(report["render_dir"]) == run / "renders" / f"test-step{report['step']:06d}"

@@ -7,7 +7,10 @@ from __future__ import annotations
 
 import importlib.util
 import re
+import shutil
+import signal
 import subprocess
+import sys
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -15,8 +18,10 @@ import numpy as np
 import pytest
 from PIL import Image, ImageSequence
 
+from fourierf_plugin.scripts import render as render_script
 from fourierf_plugin.scripts.cli import EXIT_USER_ERROR
-from fourierf_plugin.scripts.render import OUTPUT_NAMES, RenderOrbit, main, spiral_bounds
+from fourierf_plugin.scripts.render import OUTPUT_NAMES, RENDER_LOCK, RenderOrbit, main, spiral_bounds
+from fourierf_plugin.utils.interrupt import Interrupted
 from tests.helpers import (
     REPO_ROOT,
     TINY_IMAGE_SIZE,
@@ -225,3 +230,77 @@ def test_a_second_render_never_replaces_the_first_without_overwrite(run_config: 
     one, two = main(default), main(default)
     assert two.output_dir == one.output_dir.with_name(one.output_dir.name + "-1")
     assert (one.output_dir / "rgb" / "frame_00000.png").is_file()
+
+
+# -- two renders into one folder, and a stop mid-render ---------------------------------------------------------------
+def every_path(root: Path) -> set[str]:
+    return {str(p.relative_to(root)) for p in root.rglob("*")}
+
+
+def hold_render_lock(out: Path) -> subprocess.Popen[str]:
+    """Another live process holding ``out``'s render lock the way a render does (an ``flock``, its PID inside)."""
+    out.mkdir(parents=True, exist_ok=True)
+    code = (
+        "import fcntl, os, sys, time; fd = os.open(sys.argv[1], os.O_RDWR | os.O_CREAT); "
+        "fcntl.flock(fd, fcntl.LOCK_EX); os.write(fd, f'{os.getpid()}\\n'.encode()); print('held', flush=True); "
+        "time.sleep(60)"
+    )
+    holder = subprocess.Popen([sys.executable, "-c", code, str(out / RENDER_LOCK)], stdout=subprocess.PIPE, text=True)
+    assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+    return holder
+
+
+def test_a_folder_another_live_render_is_writing_is_refused_naming_its_pid(
+    run_config: Path, tmp_path: Path, capsys
+) -> None:
+    out = tmp_path / "out"
+    holder = hold_render_lock(out)
+    try:
+        code = cli_exit_code(main, [*_quick(run_config, "arc"), "--n-frames", "1", "--output-dir", str(out)])
+    finally:
+        holder.kill()
+        holder.wait()
+    err = " ".join(capsys.readouterr().err.split())
+    assert code == EXIT_USER_ERROR and "Traceback" not in err, err
+    assert f"--output-dir {out} is being written by process {holder.pid}" in err, err
+    assert f"kill {holder.pid}" in err and "choose another --output-dir" in err
+    assert every_path(out) == {RENDER_LOCK}, "nothing written beside the other render's work"
+
+
+def test_the_lock_of_a_render_that_is_gone_is_taken_over(run_config: Path, tmp_path: Path) -> None:
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / RENDER_LOCK).write_text(gone.stdout)  # what a render killed with SIGKILL leaves
+    main([*_quick(run_config, "arc"), "--n-frames", "1", "--no-video", "--output-dir", str(out)])
+    assert every_path(out) == {"rgb", "rgb/frame_00000.png"}, "the lock is released with the render"
+
+
+@pytest.mark.parametrize("where", ["default", "default --overwrite", "--output-dir"])
+def test_a_first_render_stopped_mid_frames_leaves_no_folder_it_made(
+    run_config: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, where: str
+) -> None:
+    """A run never rendered (no RUN/renders/), stopped after its first frame: the folders it made go, a user's
+    empty folder stays."""
+    run = Path(shutil.copytree(run_config.parent, tmp_path / "run", ignore=shutil.ignore_patterns("renders")))
+    (tmp_path / "mine").mkdir()
+    args = [*_quick(run / "config.json", "arc"), "--n-frames", "3"]
+    args += {
+        "default": [],
+        "default --overwrite": ["--overwrite"],
+        "--output-dir": ["--output-dir", str(tmp_path / "mine" / "new" / "deeper")],
+    }[where]
+    before = every_path(tmp_path)
+    real = render_script.iio.imwrite
+    written: list[object] = []
+
+    def write_then_stop(path: object, *rest: object, **kwargs: object) -> object:
+        written.append(path)
+        if len(written) == 2:
+            raise Interrupted(signal.SIGTERM)  # what the stop-signal handler raises mid-work
+        return real(path, *rest, **kwargs)
+
+    monkeypatch.setattr(render_script.iio, "imwrite", write_then_stop)
+    with pytest.raises(KeyboardInterrupt):
+        main(args)
+    assert every_path(tmp_path) == before

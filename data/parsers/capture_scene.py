@@ -35,8 +35,14 @@ BOX_PADDING = 0.05
 MIN_BOX_POINTS = 10
 """Fewer sparse points than this say nothing about where the object is: the box then comes from the cameras."""
 SEEN_BY_SHARE = 0.9
-"""An unbounded capture's object is where the sparse points seen by this share of the cameras lie: a capture's cameras
-keep the object in frame, while its surroundings drift in and out."""
+"""An unbounded capture's object is held by this share of the photos (in their central part, :data:`CENTRAL_FRAME`;
+in frame at all when the cameras' axes do not converge): a photographer keeps the object in frame while its
+surroundings drift in and out."""
+CENTRAL_FRAME = 0.6
+"""A photo's central part: within this share of the half-width and half-height of the principal point, and within
+this share of the half-frame's reach (at the focus's depth) of the focus in depth. The photographer aims at the
+object, so it stays there from every viewpoint, while a table around it slides to the frame's edges as the camera
+moves and a wall behind it lies far beyond the focus; more than half, so an object framed large keeps its edges."""
 OBJECT_BOX_PADDING = 0.15
 """The object's box is padded more than a scene box: sparse points thin out at an object's silhouette, and a mesh
 cut at the box must not lose the object's top."""
@@ -260,21 +266,64 @@ def normalise_object(capture: Capture, orientation: Orientation, scene_scale: fl
 def normalise_unbounded(capture: Capture, orientation: Orientation) -> NormalisedScene:
     """An object with its surroundings: posed as an object capture (the cameras fit the inner cube [-1, 1]³ about
     their focus), everything beyond the inner cube contracted (mip-NeRF 360); the grid covers the contracted box."""
-    c2w, points, _ = _upright_centred(capture, orientation)
+    c2w, points, converge = _upright_centred(capture, orientation)
     box = np.asarray(CONTRACTED_BOX, dtype=np.float64)
-    return NormalisedScene(c2w, box, OBJECT_NEAR, UNBOUNDED_FAR, None, _box_seen_by_most(c2w, capture, points))
+    return NormalisedScene(c2w, box, OBJECT_NEAR, UNBOUNDED_FAR, None, _object_box(c2w, capture, points, converge))
+
+
+def _box_from_object_points(points: np.ndarray) -> np.ndarray:
+    """Robust percentiles of the object's points, padded by ``OBJECT_BOX_PADDING``, cut to the inner cube."""
+    low, high = np.percentile(points, BOX_PERCENTILES, axis=0)
+    pad = OBJECT_BOX_PADDING * (high - low)
+    return np.stack([np.maximum(low - pad, -1.0), np.minimum(high + pad, 1.0)])
+
+
+def _object_box(c2w: np.ndarray, capture: Capture, points: np.ndarray, converge: bool) -> np.ndarray | None:
+    """The object's box of an unbounded scene (the focus at the origin when ``converge``): what the photos aim at
+    (:func:`_box_aimed_at`), else the points nearly every camera sees (:func:`_box_seen_by_most`); None when neither
+    has ``MIN_BOX_POINTS`` points."""
+    aimed = _box_aimed_at(c2w, capture, points) if converge else None
+    return aimed if aimed is not None else _box_seen_by_most(c2w, capture, points)
+
+
+def _box_aimed_at(c2w: np.ndarray, capture: Capture, points: np.ndarray) -> np.ndarray | None:
+    """The box of the sparse points in the central part (:data:`CENTRAL_FRAME`) of at least ``SEEN_BY_SHARE`` of the
+    photos, about the cameras' focus at the origin; None with too few. The points show only the object's side facing
+    the cameras, and the photographer aims at the object's middle: those in front of the focus are mirrored behind it
+    along the level mean viewing direction, so the box also holds the side no photo sees."""
+    focus = np.zeros(3)
+    central = np.zeros(len(points), dtype=np.int64)
+    for pose, k in zip(c2w, _intrinsics(capture), strict=True):
+        local = (points - pose[:, 3]) @ pose[:, :3]
+        depth = -local[:, 2]
+        safe = np.where(depth > 1e-9, depth, 1.0)
+        horizontal = np.abs(k.fx * local[:, 0] / safe) / (k.width / 2)
+        vertical = np.abs(k.fy * local[:, 1] / safe) / (k.height / 2)
+        focus_depth = float((pose[:, 3] - focus) @ pose[:, 2])
+        reach = focus_depth * max(k.width / (2 * k.fx), k.height / (2 * k.fy))
+        near_focus = np.abs(depth - focus_depth) <= CENTRAL_FRAME * reach
+        central += (depth > 1e-9) & (horizontal <= CENTRAL_FRAME) & (vertical <= CENTRAL_FRAME) & near_focus
+    kept = points[central >= SEEN_BY_SHARE * len(c2w)]
+    if len(kept) < MIN_BOX_POINTS:
+        return None
+    up = _unit(c2w[:, :, 1].sum(axis=0))
+    view = -c2w[:, :, 2].sum(axis=0)
+    view = view - (view @ up) * up  # level: the photographer walks around the object, not over it
+    if np.linalg.norm(view) > 1e-6 * len(c2w):
+        view = _unit(view)
+        towards_cameras = np.minimum((kept - focus) @ view, 0.0)
+        kept = np.concatenate([kept, kept - 2 * towards_cameras[:, None] * view])
+    return _box_from_object_points(kept)
 
 
 def _box_seen_by_most(c2w: np.ndarray, capture: Capture, points: np.ndarray) -> np.ndarray | None:
-    """The object's box of an unbounded scene: the sparse points in front of and inside the image of at least
-    ``SEEN_BY_SHARE`` of the cameras (robust percentiles, padded), cut to the inner cube; None with too few."""
+    """The sparse points in front of and inside the image of at least ``SEEN_BY_SHARE`` of the cameras (robust
+    percentiles, padded), cut to the inner cube; None with too few."""
     seen = sum(_in_view(points, pose, k)[1].astype(np.int64) for pose, k in zip(c2w, _intrinsics(capture), strict=True))
     kept = points[seen >= SEEN_BY_SHARE * len(c2w)]
     if len(kept) < MIN_BOX_POINTS:
         return None
-    low, high = np.percentile(kept, BOX_PERCENTILES, axis=0)
-    pad = OBJECT_BOX_PADDING * (high - low)
-    return np.stack([np.maximum(low - pad, -1.0), np.minimum(high + pad, 1.0)])
+    return _box_from_object_points(kept)
 
 
 def share_beyond_cameras(capture: Capture, orientation: Orientation) -> float | None:

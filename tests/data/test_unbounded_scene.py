@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import trimesh
 
 from fourierf_plugin.data.dataparser_transforms import (
     DataparserTransform,
@@ -17,7 +18,7 @@ from fourierf_plugin.data.dataparser_transforms import (
 from fourierf_plugin.data.parsers.capture_scene import CONTRACTED_BOX, UNBOUNDED_FAR
 from fourierf_plugin.data.parsers.nerfstudio import NerfstudioDataParserConfig
 from fourierf_plugin.scripts.export import default_box
-from fourierf_plugin.synthetic.room import write_room_capture
+from fourierf_plugin.synthetic.room import TABLE_HALF, TABLE_TOP_Z, write_room_capture
 
 SMALL = {"width": 48, "height": 36, "n_train": 9, "n_test": 3, "samples_per_pixel": 1}
 
@@ -42,14 +43,17 @@ def test_the_flag_still_gives_a_bounded_object(room: Path) -> None:
     assert declared.kind == "object" and declared.ray_space == "euclidean"
 
 
-def test_the_object_box_holds_the_true_object_inside_the_inner_cube(room: Path) -> None:
+def test_the_object_box_holds_the_true_object_not_the_table_inside_the_inner_cube(room: Path) -> None:
     parser = NerfstudioDataParserConfig(data=room).setup()
     box = parser.normalised().object_box
     assert box is not None and (box[0] >= -1).all() and (box[1] <= 1).all() and (box[0] < box[1]).all()
-    truth = np.asarray(json.loads((room / "geometry.json").read_text())["object"]["bounds"])
-    corners = np.stack(np.meshgrid(*truth.T, indexing="ij"), axis=-1).reshape(-1, 3)
-    inside = parser.dataparser_transform().to_normalised(corners)
-    assert (inside >= box[0] - 1e-6).all() and (inside <= box[1] + 1e-6).all()
+    to_normalised = parser.dataparser_transform().to_normalised
+    surface = to_normalised(np.asarray(trimesh.load(room / "object_surface.ply", process=False).vertices))
+    assert ((surface >= box[0]) & (surface <= box[1])).all()
+    half_x, half_y = TABLE_HALF
+    grid = np.stack(np.meshgrid(np.linspace(-half_x, half_x, 25), np.linspace(-half_y, half_y, 19)), axis=-1)
+    top = to_normalised(np.concatenate([grid.reshape(-1, 2), np.full((grid[..., 0].size, 1), TABLE_TOP_Z)], axis=1))
+    assert ((top >= box[0]) & (top <= box[1])).all(axis=1).mean() < 0.5
     outputs = parser.get_outputs("train")
     assert np.allclose(outputs.object_box, box)
 

@@ -27,7 +27,7 @@ from harness import (
     REPO,
     arguments,
     elapsed_by_step,
-    eval_cmd,
+    eval_report,
     markers,
     read_jsonl,
     read_metrics,
@@ -46,13 +46,10 @@ MODULE = (sys.executable, "-P", "-m")
 
 @dataclass(frozen=True)
 class Scene:
-    data: str
-    """The scene folder under ``<shared>/data``."""
-    flags: tuple[str, ...]
-    """Method flags beyond P-CPU's sizes."""
+    data: str  # the scene folder under <shared>/data
+    flags: tuple[str, ...]  # method flags beyond P-CPU's sizes
     parser: tuple[str, ...]
-    title: str
-    """The BENCHMARKS.md section's title."""
+    title: str  # the BENCHMARKS.md section's title
     marker: str
 
     @property
@@ -64,14 +61,6 @@ class Scene:
         return replace(self, title=f"Cost of an option on P-CPU {self.name} (interleaved A/B of flags)",
                        marker=f"{self.marker}_option")  # fmt: skip
 
-    @property
-    def begin(self) -> str:
-        return markers(self.marker, "ab_speed.py")[0]
-
-    @property
-    def end(self) -> str:
-        return markers(self.marker, "ab_speed.py")[1]
-
 
 SCENES = {
     "lego": Scene("blender/lego", tuple(OFFICIAL_OPTIMISER), tuple(PCPU_LEGO_PARSER),
@@ -79,7 +68,6 @@ SCENES = {
     "fern": Scene("llff/fern", (), ("llff-data", "--num-views", "3"),
                   "Speed A/B of a change to a forward-facing default (fern, interleaved)", "ab_speed_fern"),
 }  # fmt: skip
-BEGIN, END = SCENES["lego"].begin, SCENES["lego"].end
 FINAL = (600, 800)  # the final phase: after the last upsample (step 560)
 ITERATION_TIMER = """
 import sys, time, torch
@@ -152,12 +140,9 @@ def run_side(
                       *scene.parser, program=(*MODULE, "fourierf_plugin.scripts.train"))  # fmt: skip
     wall, _ = run_checked(train, work / f"{label}.train.log", "training", env)
     run_dir = out / scene.name / "fourierf-vm" / "run"
-    report = work / f"{label}.eval.json"
     lpips = str(shared / "lpips/lpips_alex_v0.1.pth")
-    evaluate = eval_cmd(run_dir, report, "--render-dir", "none", "--lpips-weights", lpips,
-                        program=(*MODULE, "fourierf_plugin.scripts.eval"))  # fmt: skip
-    run_checked(evaluate, work / f"{label}.eval.log", "evaluation", env)
-    result = json.loads(report.read_text())
+    result, _ = eval_report(run_dir, work, label, "--render-dir", "none", "--lpips-weights", lpips, env=env,
+                            program=(*MODULE, "fourierf_plugin.scripts.eval"))  # fmt: skip
     return {
         "label": label,
         "seed": seed,
@@ -225,7 +210,8 @@ def write_report(work: Path, markdown: Path) -> list[str]:
     if meta.get("old_flags") or meta.get("new_flags"):
         scene = scene.for_option()
     lines = summary(read_jsonl(work / "results.jsonl"), timings, meta)
-    update_benchmarks_md(markdown, scene.begin, scene.end, [*section_head(scene.title, meta["command"]), *lines, ""])
+    body = [*section_head(scene.title, meta["command"]), *lines, ""]
+    update_benchmarks_md(markdown, *markers(scene.marker, "ab_speed.py"), body)
     return lines
 
 
@@ -247,8 +233,7 @@ def main() -> None:
         flags = {"old": shlex.split(args.old_flags), "new": shlex.split(args.new_flags)}
     except ValueError as err:
         ap.error(f"--old-flags / --new-flags: {err}; quote each side's flags as one shell string")
-    if args.work is None:  # outputs/bench_ab_speed (lego), outputs/bench_ab_speed_fern (fern)
-        args.work = REPO / "outputs" / ("bench_ab_speed" if args.scene == "lego" else f"bench_ab_speed_{args.scene}")
+    args.work = args.work or REPO / "outputs" / f"bench_{scene.marker}"  # bench_ab_speed, bench_ab_speed_fern
     if args.report:
         print("\n".join(write_report(args.work, args.markdown)))
         return

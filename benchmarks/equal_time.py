@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import re
 import time
-from collections.abc import Collection, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -77,43 +77,26 @@ class Point:
         return list(variants(suite).get(self.method, {}).get("flags", []))
 
 
-def plan(
-    suite: Suite, scenes: Sequence[str], budgets: Sequence[str], known: Collection[str],
-    only: Sequence[str] | None = None,
-) -> tuple[list[Point], list[str]]:
+def plan(suite: Suite, scenes: Sequence[str], budgets: Sequence[str], only: Sequence[str] | None = None) -> list[Point]:
     """The points of the suite's methods (or ``only`` those) on ``scenes`` at ``budgets``, longest budget first (two
-    jobs at once end on short runs), and a line for each method the registry does not know (skipped)."""
-    wanted = only or suite.equal_time["methods"]
-    methods = [m for m in wanted if m in known]
-    skipped = [
-        f"skipped {m}: no such method in this install's registry (known: {', '.join(sorted(known))})"
-        for m in wanted
-        if m not in known
-    ]
+    jobs at once end on short runs)."""
     longest_first = sorted(budgets, key=parse_duration, reverse=True)
-    return [Point(scene, m, b) for b in longest_first for scene in scenes for m in methods], skipped
+    methods = only or suite.equal_time["methods"]
+    return [Point(scene, m, b) for b in longest_first for scene in scenes for m in methods]
 
 
 def iteration_plan(
-    suite: Suite, scenes: Sequence[str], known: Collection[str], only: Sequence[str] | None = None,
-    budget: str | None = None,
-) -> tuple[list[Point], list[str]]:
+    suite: Suite, scenes: Sequence[str], only: Sequence[str] | None = None, budget: str | None = None
+) -> list[Point]:
     """The equal-iterations points at ``budget`` (the suite's by default) in the suite's method order (slowest first,
-    so two jobs at once end on short runs), a variant only on its scenes, and a line for each method the registry does
-    not know (skipped)."""
+    so two jobs at once end on short runs), a variant only on its scenes."""
     stage, found = suite.equal_time["iterations"], variants(suite)
-    wanted = only or stage["methods"]
-    base = {m: found.get(m, {}).get("method", m) for m in wanted}
-    skipped = [f"skipped {m}: no such method in this install's registry ({base[m]})" for m in wanted
-               if base[m] not in known]  # fmt: skip
-    points = [
+    return [
         Point(scene, m, budget or stage["budget"])
-        for m in wanted
-        if base[m] in known
+        for m in only or stage["methods"]
         for scene in scenes
         if scene in found.get(m, {}).get("scenes", scenes)
     ]
-    return points, skipped
 
 
 def point_command(point: Point, suite: Suite, data: Path, work: Path) -> list[str]:
@@ -160,10 +143,3 @@ def execute(point: Point, suite: Suite, data: Path, work: Path, lpips: Path, job
         "train_view_ids": trained["train_view_ids"], "run_dir": trained["run_dir"],
         "seconds": time.perf_counter() - started,
     }  # fmt: skip
-
-
-def known_methods() -> set[str]:
-    """The method names this install's registry knows (presets and plugins)."""
-    from fourierf_plugin.method_configs.registry import all_methods
-
-    return set(all_methods)

@@ -8,7 +8,6 @@ final-phase seconds per iteration, peak GPU memory and PSNR next to the paper's.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -18,7 +17,7 @@ from harness import (
     arguments,
     done_record,
     elapsed_by_step,
-    eval_cmd,
+    eval_report,
     read_metrics,
     run_checked,
     run_dir_in,
@@ -57,11 +56,8 @@ def run(name: str, scene: Path, parser: list[str], args: argparse.Namespace) -> 
     tail = [s for s in steps if s >= 0.8 * steps[-1]]
     tail = tail if len(tail) > 1 else steps[-2:]
     s_per_it = seconds_per_iteration(elapsed, tail[0], tail[-1]) if len(tail) > 1 else None
-    report = args.work / f"{name}.eval.json"
     lpips = [] if args.lpips is None else ["--lpips-weights", str(args.lpips)]
-    run_checked(eval_cmd(run_dir, report, "--render-dir", "none", *device, *lpips), args.work / f"{name}.eval.log",
-                "evaluation")  # fmt: skip
-    results = json.loads(report.read_text())["results"]
+    results = eval_report(run_dir, args.work, name, "--render-dir", "none", *device, *lpips)[0]["results"]
     return {
         "protocol": name, "device": args.device, "tiny": args.tiny, "train_seconds": done.get("train_seconds"),
         "wall_seconds": wall, "final_s_per_it": s_per_it, "peak_gpu_gb": done.get("peak_device_memory_gb"),

@@ -11,8 +11,10 @@ import re
 import shutil
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -78,10 +80,14 @@ def train_cmd(method: str, data: Path, out: Path, stamp: str, *flags: str, progr
     return [*program, method, "--data", str(data), "--output-dir", str(out), "--timestamp", stamp, *flags]
 
 
-def eval_cmd(run_dir: Path, report: Path, *flags: str, program: Sequence[str] = EVAL) -> list:
-    """A ``fourierf-eval`` command of a run, its report to ``report`` (overwritten)."""
-    return [*program, "--load-config", str(run_dir / "config.json"), "--output-path", str(report), "--overwrite",
-            *flags]  # fmt: skip
+def eval_report(
+    run_dir: Path, work: Path, name: str, *flags: str, env: dict[str, str] | None = None, program: Sequence[str] = EVAL
+) -> tuple[dict, float]:
+    """``fourierf-eval`` of a run (to ``work/<name>.eval.json``, its log beside): the report and the wall seconds."""
+    report = work / f"{name}.eval.json"
+    cmd = [*program, "--load-config", str(run_dir / "config.json"), "--output-path", str(report), "--overwrite", *flags]
+    seconds, _ = run_checked(cmd, work / f"{name}.eval.log", "evaluation", env)
+    return json.loads(report.read_text()), seconds
 
 
 def run_dir_in(out: Path, method: str, stamp: str) -> Path:
@@ -216,12 +222,9 @@ def evaluate(
 ) -> dict:
     """Evaluate a trained run on one split, at its latest checkpoint or ``checkpoint``: metrics and timings for its
     result row (other splits' keys prefixed with the split)."""
-    tag = "" if split == "test" else f".{split}"
-    eval_json = work / f"{key}{tag}.eval.json"
     flags = ["--lpips-weights", str(lpips), "--split", split, *thread_flags(threads)]
     flags += ["--checkpoint", str(checkpoint)] if checkpoint is not None else []
-    eval_s, _ = run_checked(eval_cmd(run_dir, eval_json, *flags), work / f"{key}{tag}.eval.log", "evaluation")
-    report = json.loads(eval_json.read_text())
+    report, eval_s = eval_report(run_dir, work, key if split == "test" else f"{key}.{split}", *flags)
     metrics = {k: report["results"][k] for k in ("psnr", "ssim", "lpips")}
     if split != "test":
         return {f"{split}_{k}": v for k, v in metrics.items()} | {f"{split}_view_ids": report.get("view_ids")}
@@ -238,21 +241,60 @@ def save_results(path: Path, results: dict[str, dict]) -> None:
     tmp.replace(path)
 
 
-def run_plan(plan: Sequence[Run], results_path: Path, execute: Callable[[Run], dict]) -> dict[str, dict]:
-    """Execute the runs not yet in the results file; returns the planned rows."""
-    results = load_results(results_path)
-    for run in plan:
-        if run.key in results:
-            continue
-        print(f"running {run.key} ...", flush=True)
-        row = execute(run)
-        results[run.key] = row
-        with results_path.open("a") as fh:
-            fh.write(json.dumps(row) + "\n")
-        summary = f"psnr {row['psnr']:.2f}  ssim {row['ssim']:.3f}  lpips {row['lpips']:.3f}"
-        print(f"  {summary}  train {row['train_seconds']:.0f}s", flush=True)
-    planned = {r.key for r in plan}
-    return {k: v for k, v in results.items() if k in planned}
+@dataclass(frozen=True)
+class Job:
+    key: str
+    """The row's key in the results."""
+    logs: Path
+    """Its logs' path less the ``.train.log`` / ``.eval.log`` ending: a failure prints the last one's end."""
+    execute: Callable[[], dict]
+
+
+def summary(row: dict) -> str:
+    if "too_short" in row:
+        return f"budget too short: {row['too_short']}"
+    if "trained_seconds" in row:
+        return f"test {row['psnr']:.2f}  {row['iterations']} iterations in {row['trained_seconds']:.0f}s"
+    score = f"val {row['val_psnr']:.2f}" if "val_psnr" in row else f"test {row['psnr']:.2f}"
+    return f"{score}  train {row['train_seconds']:.0f}s"
+
+
+def run_all(jobs: Sequence[Job], path: Path, at_once: int = 1, again: str | None = None) -> None:
+    """Run the jobs not yet recorded in ``path`` (all, ``again``), ``at_once`` at a time, in their order; each finished
+    row is recorded at once."""
+    done = {} if again else load_results(path)
+    todo = [job for job in jobs if job.key not in done]
+    lock = threading.Lock()
+
+    def one(job: Job) -> None:
+        try:
+            row = job.execute()
+        except RuntimeError as err:  # the log's end says why; the other runs go on
+            logs = sorted(job.logs.parent.glob(f"{job.logs.name}*.log"))
+            tail = "\n".join(logs[-1].read_text().splitlines()[-15:]) if logs else ""
+            print(f"FAILED {job.key}: {err}\n{tail}", flush=True)
+            return
+        row["key"] = job.key
+        with lock:
+            record(path, row, again)
+        print(f"{job.key}: {summary(row)}", flush=True)
+
+    print(f"{len(todo)} runs to do ({len(jobs) - len(todo)} recorded)", flush=True)
+    with ThreadPoolExecutor(max(1, at_once)) as pool:
+        list(pool.map(one, todo))
+
+
+def record(path: Path, row: dict, again: str | None = None) -> None:
+    """Append a finished row. Run ``--again``, a recorded key's earlier row first moves to ``repeats.jsonl`` with the
+    note (the results keep one row a key), so nothing recorded is lost and the report can set the two side by side."""
+    held = load_results(path) if again else {}
+    earlier = held.pop(row["key"], None)
+    if earlier is not None:
+        with path.with_name(REPEATS).open("a") as fh:
+            fh.write(json.dumps(earlier | {"repeat": again}) + "\n")
+        save_results(path, held)
+    with path.open("a") as fh:
+        fh.write(json.dumps(row) + "\n")
 
 
 def load_results(path: Path) -> dict[str, dict]:

@@ -21,7 +21,7 @@ from harness import (
     arguments,
     done_record,
     elapsed_by_step,
-    eval_cmd,
+    eval_report,
     read_jsonl,
     read_metrics,
     run_checked,
@@ -51,7 +51,7 @@ def reference_run(peer: Path, seed: int, log: Path) -> dict:
 
 def our_run(shared: Path, seed: int, work: Path) -> dict:
     """One run of this project, then every saved checkpoint scored on the test views (after, untimed)."""
-    out, log = work / "runs" / f"ours-{seed}", work / f"ours-{seed}.eval.log"
+    out, lpips = work / "runs" / f"ours-{seed}", str(shared / "lpips/lpips_alex_v0.1.pth")
     flags = [
         "--seed", str(seed), "--max-num-iterations", "800", *GRID_FLAGS[:-2], "--steps-per-save", str(EVAL_EVERY),
         "--keep-checkpoints", "0", "--log-every", str(EVAL_EVERY // 2), *OFFICIAL_OPTIMISER, *PCPU_LEGO_PARSER,
@@ -64,11 +64,8 @@ def our_run(shared: Path, seed: int, work: Path) -> dict:
     curve = {}
     for ckpt in sorted((run_dir / "checkpoints").glob("step-*.ckpt")):
         step = int(ckpt.stem.split("-")[1])
-        report = work / f"ours-{seed}.step{step}.json"
-        lpips = str(shared / "lpips/lpips_alex_v0.1.pth")
-        run_checked(eval_cmd(run_dir, report, "--checkpoint", str(ckpt), "--render-dir", "none", "--lpips-weights",
-                             lpips), log, "evaluation")  # fmt: skip
-        curve[step] = json.loads(report.read_text())["results"]["psnr"]
+        flags = ["--checkpoint", str(ckpt), "--render-dir", "none", "--lpips-weights", lpips]
+        curve[step] = eval_report(run_dir, work, f"ours-{seed}.step{step}", *flags)[0]["results"]["psnr"]
     return {
         "train_wall_s": done_record(records)["train_seconds"],  # type: ignore[index]
         "final_phase_s_per_it": seconds_per_iteration(elapsed, 600, 800),

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import json
 import subprocess
+import sys
+from functools import partial
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -16,13 +18,15 @@ import trimesh
 from harness import (
     BIN,
     REPO,
+    Job,
     Run,
     arguments,
     done_record,
     evaluate,
+    load_results,
     read_metrics,
+    run_all,
     run_checked,
-    run_plan,
     run_timed,
     section_head,
     thread_flags,
@@ -157,8 +161,11 @@ def main() -> None:
         subprocess.run([str(BIN / "fourierf-synth"), "--output-dir", str(room), "--kind", "room"], check=True)
     lpips = args.shared / "lpips" / "lpips_alex_v0.1.pth"
     plan = [Run(m, 0, args.seed, v) for v in VIEWS for m in METHODS]
-    results = run_plan(plan, args.results, lambda run: execute(run, room, args.work, lpips, args.threads))
-    rows = {f"{r['method']}_{r['views']}": r for r in results.values()}
+    run_all([Job(r.key, args.work / r.key, partial(execute, r, room, args.work, lpips, args.threads)) for r in plan],
+            args.results)  # fmt: skip
+    rows = {f"{r['method']}_{r['views']}": r for r in load_results(args.results).values() if r["seed"] == args.seed}
+    if len(rows) < len(plan):
+        sys.exit(f"error: {len(plan) - len(rows)} runs failed (their logs are under {args.work}); run again")
     picture(rows, room, args.work, args.threads, args.picture)
     link = args.picture.relative_to(REPO) if args.picture.is_relative_to(REPO) else args.picture
     write_section(args.markdown, "room-capture", "room_capture.py", section(rows, args.seed, link))

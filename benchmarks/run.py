@@ -1,22 +1,14 @@
-"""The suite's runner: trains and evaluates points of ``suite.toml`` and appends one JSONL row for each.
-
-A point is (method, scene, protocol, setting, seed). Each run trains with ``fourierf-train`` (the budget rule off, so
-it has exactly its setting's values), then ``fourierf-eval`` scores it on the test and the val views. Stages:
+"""The suite's runner: trains and evaluates points of ``suite.toml`` (the budget rule off, so each run has exactly
+its setting's values) and appends one JSONL row each; a recorded point is skipped unless run ``--again NOTE``.
 
     python benchmarks/run.py sweep  --protocol cpu-800 mid-3000 --scene lego fern  # every setting, first seed
-    python benchmarks/run.py seeds  --protocol cpu-800 mid-3000 --scene lego fern  # the val choice, later seeds
-    python benchmarks/run.py seeds  --protocol mid-3000 --scene lego --seeds 1     # one later seed at a time
+    python benchmarks/run.py seeds  --protocol mid-3000 --scene lego --seeds 1     # the val choice, later seeds
     python benchmarks/run.py curve  --scene fern     # cpu-3000, a checkpoint every 500 iterations evaluated
-    python benchmarks/run.py sweep  --only S --again "threads not recorded"  # run recorded points again
+    python benchmarks/run.py sweep  --only S --again "threads not recorded"  # the earlier row to repeats.jsonl
     python benchmarks/run.py merge  --rows lane2/results.jsonl               # rows run elsewhere
-    python benchmarks/run.py equal-time --scene lego fern --budget 1m 3m --jobs 2  # equal_time.py: wall-time budgets
-    python benchmarks/run.py equal-iterations --scene lego fern --jobs 2   # the same, each at the suite's iterations
+    python benchmarks/run.py equal-time --scene lego fern --budget 1m 3m --jobs 2  # wall-time budgets
+    python benchmarks/run.py equal-iterations --scene lego fern --jobs 2   # the same, at the suite's iterations
     python benchmarks/report.py                                              # the BENCHMARKS.md sections
-
-``--device cuda --jobs 4`` runs four trainings at once on one GPU. GPU runs are not bit-reproducible (grid_sample's
-CUDA backward accumulates with atomics), nor is a CPU run on more than one thread (parallel kernels sum in a varying
-order); on one thread, the default, a CPU run is. Where a key is run again (``--again NOTE``), its earlier row moves
-to ``repeats.jsonl`` beside the results with NOTE as its ``repeat`` note, and the report sets both side by side.
 """
 
 from __future__ import annotations
@@ -24,10 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import threading
-from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from collections.abc import Sequence
 from pathlib import Path
 
 import equal_time
@@ -35,8 +24,8 @@ from harness import (
     EQUAL_ITERATIONS_RESULTS,
     EQUAL_TIME_RESULTS,
     QUALITY_RESULTS,
-    REPEATS,
     REPO,
+    Job,
     Run,
     Suite,
     applies,
@@ -45,8 +34,9 @@ from harness import (
     load_results,
     load_suite,
     point_run,
+    record,
     rows_by,
-    save_results,
+    run_all,
     setting_flags,
     train_and_eval,
 )
@@ -90,69 +80,14 @@ def curve_points(run_dir: Path, run: Run, work: Path, lpips: Path, threads: int 
     return points
 
 
-@dataclass(frozen=True)
-class Job:
-    key: str
-    """The row's key in the results."""
-    logs: Path
-    """Its logs' path less the ``.train.log`` / ``.eval.log`` ending: a failure prints the last one's end."""
-    execute: Callable[[], dict]
-    summary: Callable[[dict], str]
-
-
 def quality_job(point: Point, args: argparse.Namespace) -> Job:
     scene, run = point[0], point[3]
-    summary = lambda row: f"val {row['val_psnr']:.2f}  train {row['train_seconds']:.0f}s"  # noqa: E731
-    return Job(f"{scene}/{run.key}", args.work / scene / run.key, lambda: execute(point, args), summary)
+    return Job(f"{scene}/{run.key}", args.work / scene / run.key, lambda: execute(point, args))
 
 
 def equal_time_job(point: equal_time.Point, args: argparse.Namespace) -> Job:
-    def summary(row: dict) -> str:
-        if "too_short" in row:
-            return f"budget too short: {row['too_short']}"
-        return f"test {row['psnr']:.2f}  {row['iterations']} iterations in {row['trained_seconds']:.0f}s"
-
-    logs = args.work / point.scene / point.run(SUITE).key
-    return Job(point.key, logs, lambda: equal_time.execute(point, SUITE, args.data, args.work, args.lpips, args.jobs),
-               summary)  # fmt: skip
-
-
-def run_all(jobs: Sequence[Job], args: argparse.Namespace) -> None:
-    """Run the jobs not yet recorded, ``--jobs`` at a time, in their order; each finished row is appended at once."""
-    path = args.results
-    done = {} if args.again else load_results(path)
-    todo = [job for job in jobs if job.key not in done]
-    lock = threading.Lock()
-
-    def one(job: Job) -> None:
-        try:
-            row = job.execute()
-        except RuntimeError as err:  # the log's end says why; the other runs go on
-            logs = sorted(job.logs.parent.glob(f"{job.logs.name}*.log"))
-            tail = "\n".join(logs[-1].read_text().splitlines()[-15:]) if logs else ""
-            print(f"FAILED {job.key}: {err}\n{tail}", flush=True)
-            return
-        row["key"] = job.key
-        with lock:
-            record(path, row, args.again)
-        print(f"{job.key}: {job.summary(row)}", flush=True)
-
-    print(f"{len(todo)} runs to do ({len(jobs) - len(todo)} recorded)", flush=True)
-    with ThreadPoolExecutor(max(1, args.jobs)) as pool:
-        list(pool.map(one, todo))
-
-
-def record(path: Path, row: dict, again: str | None = None) -> None:
-    """Append a finished row. Run ``--again``, a recorded key's earlier row first moves to ``repeats.jsonl`` with the
-    note (the results keep one row a key), so nothing recorded is lost and the report can set the two side by side."""
-    held = load_results(path) if again else {}
-    earlier = held.pop(row["key"], None)
-    if earlier is not None:
-        with path.with_name(REPEATS).open("a") as fh:
-            fh.write(json.dumps(earlier | {"repeat": again}) + "\n")
-        save_results(path, held)
-    with path.open("a") as fh:
-        fh.write(json.dumps(row) + "\n")
+    run = lambda: equal_time.execute(point, SUITE, args.data, args.work, args.lpips, args.jobs)  # noqa: E731
+    return Job(point.key, args.work / point.scene / point.run(SUITE).key, run)
 
 
 ROW_FIELDS = ("key", "scene", "protocol", "method", "setting", "seed", "val_psnr", "psnr")
@@ -268,69 +203,58 @@ def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argpa
     ap.add_argument("--lpips", type=Path, default=REPO.parent / "shared" / "lpips" / "lpips_alex_v0.1.pth")
     ap.add_argument("--work", type=Path, default=None, help="run folders and logs (default: outputs/bench_STAGE)")
     ap.add_argument("--results", type=Path, default=None,
-                    help="one row per finished run (the report reads it; finished runs are skipped); default: "
-                         "results/quality/results.jsonl, for equal-time results/equal_time/results.jsonl, for "
-                         "equal-iterations results/equal_iterations/results.jsonl")  # fmt: skip
+                    help="one row per finished run (finished runs are skipped); default: the stage's file under "
+                         "benchmarks/results/")  # fmt: skip
     ap.add_argument("--budget", nargs="+", default=None,
-                    help="equal-time: the --time-budget of each point (default: the suite's budgets); "
-                         "equal-iterations: one budget of iterations such as 200it (default: the suite's)")  # fmt: skip
+                    help="equal-time: the --time-budget of each point; equal-iterations: one budget of iterations "
+                         "such as 200it (default: the suite's)")  # fmt: skip
     ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
     ap.add_argument("--only", nargs="+", default=None, help="sweep only these settings (names from suite.toml)")
-    every_method = dict.fromkeys(
-        [*suite.methods, *suite.equal_time["methods"], *suite.equal_time["iterations"]["methods"]]
-    )
+    stage_methods = {
+        "equal-time": suite.equal_time["methods"],
+        "equal-iterations": suite.equal_time["iterations"]["methods"],
+    }
+    every_method = dict.fromkeys([*suite.methods, *(m for ms in stage_methods.values() for m in ms)])
     ap.add_argument("--methods", nargs="+", choices=tuple(every_method), default=None, help="run only these methods")
     ap.add_argument("--seeds", nargs="+", type=int, choices=suite.seeds[1:], default=None,
                     help="the seeds stage runs only these of the later seeds (default: all)")  # fmt: skip
     ap.add_argument("--jobs", type=int, default=1, help="trainings at once")
     ap.add_argument("--threads", type=int, default=1,
-                    help="CPU threads per training and its evaluations (1: a CPU run is bit-reproducible; more are "
-                         "faster alone, but sum floats in a varying order)")  # fmt: skip
+                    help="CPU threads per training and its evaluations (1: a CPU run is bit-reproducible)")  # fmt: skip
     ap.add_argument("--again", metavar="NOTE", default=None,
-                    help="run the plan's recorded runs again too; each earlier row moves to repeats.jsonl with NOTE "
-                         "(what differed then, e.g. 'threads not recorded')")  # fmt: skip
+                    help="run recorded runs again too; each earlier row moves to repeats.jsonl with NOTE (what "
+                         "differed then, e.g. 'threads not recorded')")  # fmt: skip
     ap.add_argument("--rows", nargs="+", type=Path, default=None, metavar="FILE",
                     help="merge: results files written elsewhere (another --results, the device)")  # fmt: skip
     args = ap.parse_args(argv)
-    timed = args.stage == "equal-time"
-    folder = {"equal-time": "bench_equal_time", "equal-iterations": "bench_equal_iterations"}.get(args.stage)
-    args.work = args.work or REPO / "outputs" / (folder or "bench_quality")
+    stage, timed, counted = args.stage, args.stage == "equal-time", args.stage == "equal-iterations"
     results = {"equal-time": EQUAL_TIME_RESULTS, "equal-iterations": EQUAL_ITERATIONS_RESULTS}
-    args.results = args.results or results.get(args.stage, QUALITY_RESULTS)
-    counted = args.stage == "equal-iterations"
+    args.work = args.work or REPO / "outputs" / f"bench_{stage.replace('-', '_') if stage in results else 'quality'}"
+    args.results = args.results or results.get(stage, QUALITY_RESULTS)
     if args.budget is not None and not (timed or counted):
-        sys.exit(f"error: --budget sets the equal-time stage's budgets; drop it for the {args.stage} stage")
-    if (
-        counted
-        and args.budget is not None
-        and (len(args.budget) != 1 or not equal_time.budget_iterations(args.budget[0]))
-    ):
+        sys.exit(f"error: --budget sets the equal-time stage's budgets; drop it for the {stage} stage")
+    if counted and args.budget and (len(args.budget) != 1 or not equal_time.budget_iterations(args.budget[0])):
         sys.exit(f"error: --budget {' '.join(args.budget)}: the equal-iterations stage takes one count, e.g. 200it")
     default = [suite.equal_time["iterations"]["budget"]] if counted else list(suite.equal_time["budgets"])
     args.budget = args.budget or default
-    stage_methods = {
-        "equal-time": suite.equal_time["methods"],
-        "equal-iterations": suite.equal_time["iterations"]["methods"],
-    }.get(args.stage, suite.methods)
-    if set(args.methods or ()) - set(stage_methods):
-        sys.exit(f"error: --methods: the {args.stage} stage runs {', '.join(stage_methods)}; pass some of those")
-    if args.protocol is None:
-        args.protocol = ["cpu-3000"] if args.stage == "curve" else ["cpu-800", "mid-3000", "mid-800"]
+    allowed = stage_methods.get(stage, suite.methods)
+    if set(args.methods or ()) - set(allowed):
+        sys.exit(f"error: --methods: the {stage} stage runs {', '.join(allowed)}; pass some of those")
+    args.protocol = args.protocol or (["cpu-3000"] if stage == "curve" else ["cpu-800", "mid-3000", "mid-800"])
     if args.threads < 1:
         sys.exit(f"error: --threads {args.threads} must be at least 1; pass e.g. --threads 2, or omit it for 1")
     if args.again is not None and not args.again.strip():
-        sys.exit("error: --again NOTE reruns the runs of a sweep, seeds or curve stage (or merges runs of recorded "
-                 "keys) and needs a note saying what differed then, e.g. --again 'threads not recorded'")  # fmt: skip
-    if (args.rows is None) != (args.stage != "merge"):
+        sys.exit("error: --again NOTE reruns recorded runs (or merges rows of recorded keys) and needs a note saying "
+                 "what differed then, e.g. --again 'threads not recorded'")  # fmt: skip
+    if (args.rows is None) != (stage != "merge"):
         sys.exit("error: --rows FILE ... goes with the merge stage, and the merge stage needs it: "
                  "run.py merge --rows other/results.jsonl")  # fmt: skip
-    if args.seeds and args.stage != "seeds":
-        sys.exit(f"error: --seeds picks the later seeds of the seeds stage; drop it for the {args.stage} stage")
+    if args.seeds and stage != "seeds":
+        sys.exit(f"error: --seeds picks the later seeds of the seeds stage; drop it for the {stage} stage")
     known = {name for scene in args.scene for name in suite.settings[scene]}
-    unknown = sorted(set(args.only or ()) - known)
-    if unknown:
-        scenes = " ".join(args.scene)
-        sys.exit(f"error: --only {' '.join(unknown)}: no such setting for {scenes}; known: {sorted(known)}")
+    if unknown := sorted(set(args.only or ()) - known):
+        sys.exit(f"error: --only {' '.join(unknown)}: no such setting for {' '.join(args.scene)}; known: "
+                 f"{sorted(known)}")  # fmt: skip
     return args
 
 
@@ -347,24 +271,18 @@ def main() -> None:
     for scene in args.scene:
         if not (args.data / SUITE.scenes[scene]["path"]).exists():
             sys.exit(f"error: {scene} not found under {args.data}; pass --data FOLDER")
-    if args.stage == "equal-time":
+    if args.stage in ("equal-time", "equal-iterations"):
         try:
-            known = equal_time.known_methods()
-            points, skipped = equal_time.plan(SUITE, args.scene, args.budget, known, args.methods)
+            if args.stage == "equal-time":
+                points = equal_time.plan(SUITE, args.scene, args.budget, args.methods)
+            else:
+                points = equal_time.iteration_plan(SUITE, args.scene, args.methods, args.budget[0])
         except UserError as err:  # a --budget that is no duration
             sys.exit(f"error: --budget: {err}")
-        print("\n".join(skipped), flush=True)
-        run_all([equal_time_job(p, args) for p in points], args)
-        return
-    if args.stage == "equal-iterations":
-        known = equal_time.known_methods()
-        points, skipped = equal_time.iteration_plan(SUITE, args.scene, known, args.methods, args.budget[0])
-        print("\n".join(skipped), flush=True)
-        run_all([equal_time_job(p, args) for p in points], args)
-        return
+        return run_all([equal_time_job(p, args) for p in points], args.results, args.jobs, args.again)
     plan = {"sweep": sweep_plan, "seeds": seeds_plan, "curve": curve_plan}[args.stage](args)
     plan.sort(key=lambda p: (-p[3].iters, p[0] != "fern"))  # longest first: the pool ends on short runs
-    run_all([quality_job(p, args) for p in plan], args)
+    run_all([quality_job(p, args) for p in plan], args.results, args.jobs, args.again)
 
 
 if __name__ == "__main__":

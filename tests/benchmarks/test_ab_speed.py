@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 from types import ModuleType
 
+import harness
 import pytest
 
 from tests.helpers import load_benchmark
@@ -19,6 +20,11 @@ SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "ab_speed.py"
 @pytest.fixture(scope="module")
 def ab_speed() -> ModuleType:
     return load_benchmark("ab_speed")
+
+
+def marks(scene: object) -> tuple[str, str]:
+    """The markers a scene's section is written between."""
+    return harness.markers(scene.marker, "ab_speed.py")  # type: ignore[attr-defined]
 
 
 def _rows() -> list[dict]:
@@ -51,7 +57,8 @@ def test_the_report_rewrites_its_section_from_the_record(ab_speed: ModuleType, t
     (tmp_path / "iterations.json").write_text(json.dumps({"old": [0.2], "new": [0.1]}))
     (tmp_path / "meta.json").write_text(json.dumps(META))
     markdown = tmp_path / "BENCHMARKS.md"
-    markdown.write_text("# Benchmarks\n\n" + ab_speed.BEGIN + "\nold text\n" + ab_speed.END + "\n\n## After\n")
+    begin, end = marks(ab_speed.SCENES["lego"])
+    markdown.write_text(f"# Benchmarks\n\n{begin}\nold text\n{end}\n\n## After\n")
     ab_speed.write_report(tmp_path, markdown)
     text = markdown.read_text()
     assert "old text" not in text and "| 90.0 | 80.0 | 0.89 |" in text and text.endswith("## After\n")
@@ -82,7 +89,9 @@ def test_each_scene_reports_into_its_own_section(ab_speed: ModuleType, tmp_path:
     (tmp_path / "iterations.json").write_text(json.dumps({"old": [0.2], "new": [0.1]}))
     lego, fern = ab_speed.SCENES["lego"], ab_speed.SCENES["fern"]
     markdown = tmp_path / "BENCHMARKS.md"
-    markdown.write_text(f"{lego.begin}\nlego A/B\n{lego.end}\n{fern.begin}\nfern A/B\n{fern.end}\n")
+    markdown.write_text(
+        "\n".join([marks(lego)[0], "lego A/B", marks(lego)[1], marks(fern)[0], "fern A/B", marks(fern)[1], ""])
+    )
     (tmp_path / "meta.json").write_text(json.dumps(META | {"scene": "fern"}))
     ab_speed.write_report(tmp_path, markdown)
     text = markdown.read_text()
@@ -91,7 +100,7 @@ def test_each_scene_reports_into_its_own_section(ab_speed: ModuleType, tmp_path:
     ab_speed.write_report(tmp_path, markdown)
     text = markdown.read_text()
     assert "lego A/B" not in text and lego.title in text and fern.title in text
-    assert (lego.begin, lego.end) == (ab_speed.BEGIN, ab_speed.END), "the lego section keeps its markers"
+    assert marks(lego)[0].startswith("<!-- ab_speed:begin"), "the lego section keeps its markers"
 
 
 def test_an_option_ab_reports_into_its_own_section(ab_speed: ModuleType, tmp_path: Path) -> None:
@@ -102,11 +111,11 @@ def test_an_option_ab_reports_into_its_own_section(ab_speed: ModuleType, tmp_pat
     lego = ab_speed.SCENES["lego"]
     option = lego.for_option()
     markdown = tmp_path / "BENCHMARKS.md"
-    markdown.write_text(f"{lego.begin}\nlego A/B\n{lego.end}\n")
+    markdown.write_text("\n".join([marks(lego)[0], "lego A/B", marks(lego)[1], ""]))
     ab_speed.write_report(tmp_path, markdown)
     text = markdown.read_text()
     assert "lego A/B" in text and option.title in text and "| 90.0 | 80.0 | 0.89 |" in text
-    assert option.begin in text and option.end in text and option.marker != lego.marker
+    assert all(m in text for m in marks(option)) and option.marker != lego.marker
 
 
 def test_unbalanced_side_flags_are_one_clear_error(tmp_path: Path) -> None:

@@ -381,10 +381,9 @@ def test_run_all_skips_recorded_runs_unless_run_again(tmp_path: Path, monkeypatc
     monkeypatch.setattr(runner, "execute", execute)
     args = argparse.Namespace(results=path, jobs=1, again=None, work=tmp_path)
     point = ("lego", "cpu-800", "tv4", run)
-    runner.run_all([runner.quality_job(point, args)], args)
+    runner.run_all([runner.quality_job(point, args)], path)
     assert ran == [] and load_results(path)[f"lego/{run.key}"]["val_psnr"] == 21.0  # recorded: skipped
-    again = argparse.Namespace(**{**vars(args), "again": "threads not recorded"})
-    runner.run_all([runner.quality_job(point, again)], again)
+    runner.run_all([runner.quality_job(point, args)], path, again="threads not recorded")
     assert ran == [run.key] and load_results(path)[f"lego/{run.key}"]["val_psnr"] == 21.5
     assert [r["repeat"] for r in read_jsonl(path.with_name(harness.REPEATS))] == ["threads not recorded"]
 

@@ -1,13 +1,6 @@
-"""The equal-time and equal-iterations stages: each method given the same wall time (or the same iterations) on each
-scene, as a user would run it.
-
-A point is (scene, method, budget): ``fourierf-train METHOD --time-budget B --threads 1`` with no size flag (the run
-is sized for the scene and the machine, the short-run rules applying as to any run), then ``fourierf-eval`` on the
-test views. A budget of iterations ("800it") is ``--max-num-iterations 800`` in place of ``--time-budget``, the run
-otherwise sized as the default CPU run; its method may be a variant of the suite's (a method with flags). One row a
-point in ``results/equal_time/results.jsonl`` (``results/equal_iterations/``); a budget too short for a method's fewest
-iterations is a row that says so, not a failure.
-"""
+"""The equal-time and equal-iterations stages (``run.py equal-time`` / ``equal-iterations``): each method given the
+same wall time (``--time-budget``) or iterations ("800it") on each scene, as a user would run it with no size flag; a
+budget too short for a method's fewest iterations is a row that says so, not a failure."""
 
 from __future__ import annotations
 

@@ -397,7 +397,7 @@ class Protocol:
     grid: tuple[int, int]
     """The grid's initial and final side."""
     lego_downscale: int
-    scenes: tuple[str, ...] = ("lego", "fern")
+    scenes: Sequence[str] = ("lego", "fern")
     curve_of: str | None = None
     """The protocol of the same sizes at 800 iterations, whose val choice a curve along this one trains."""
 
@@ -407,14 +407,14 @@ class Protocol:
 
 @dataclass(frozen=True)
 class Suite:
-    methods: tuple[str, ...]
-    seeds: tuple[int, ...]
+    methods: list[str]
+    seeds: list[int]
     protocols: dict[str, Protocol]
     scenes: dict[str, dict]
     settings: dict[str, tuple[str, ...]]
-    targets: tuple[dict, ...]
+    targets: list[dict]
     rule_along_the_budget: dict[str, dict[str, str]]
-    grids: tuple[dict, ...]
+    grids: list[dict]
     curve_every: int
     equal_time: dict
     """Methods, scenes and budgets of the equal-time stage, and what its report compares them with."""
@@ -428,16 +428,9 @@ class Suite:
 
 def load_suite(path: Path = SUITE_FILE) -> Suite:
     data = tomllib.loads(path.read_text())
-    protocols = {
-        name: Protocol(name, p["iters"], p["rays"], tuple(p["grid"]), p["lego_downscale"],
-                       tuple(p.get("scenes", ("lego", "fern"))), p.get("curve_of"))
-        for name, p in data["protocols"].items()
-    }  # fmt: skip
-    return Suite(
-        tuple(data["methods"]), tuple(data["seeds"]), protocols, data["scenes"],
-        {scene: tuple(names) for scene, names in data["settings"].items()}, tuple(data["targets"]),
-        data["rule_along_the_budget"], tuple(data["grids"]), data["curve_every"], data["equal_time"],
-    )  # fmt: skip
+    protocols = {name: Protocol(name, **p | {"grid": tuple(p["grid"])}) for name, p in data["protocols"].items()}
+    settings = {scene: tuple(names) for scene, names in data["settings"].items()}
+    return Suite(**data | {"protocols": protocols, "settings": settings})
 
 
 RAMP = "--pipeline.model.fourier.ramp-fraction"

@@ -1,8 +1,8 @@
 """P-CPU against the official FourieRF code (``../shared/peer``, CPU patches), interleaved seed by seed: ratios of
 time to the reference's final PSNR (ours scored every 10 % of the run, untimed), per iteration and per run.
 
-    ../shared/peer/setup.sh                                  # once: the reference's virtualenv
-    python benchmarks/pcpu_vs_reference.py [--report-only]   # --report-only: the section from results.jsonl
+    ../shared/peer/setup.sh                  # once: the reference's virtualenv
+    python benchmarks/pcpu_vs_reference.py   # runs the seeds not yet recorded, then writes the section
 """
 
 from __future__ import annotations
@@ -32,7 +32,6 @@ from harness import (
 )
 
 EVAL_EVERY = 80  # 10 % of the run
-assert GRID_FLAGS[-2] == "--steps-per-save", "GRID_FLAGS ends with its own save interval, replaced here"
 
 
 def reference_run(peer: Path, seed: int, log: Path) -> dict:
@@ -53,7 +52,7 @@ def our_run(shared: Path, seed: int, work: Path) -> dict:
     """One run of this project, then every saved checkpoint scored on the test views (after, untimed)."""
     out, lpips = work / "runs" / f"ours-{seed}", str(shared / "lpips/lpips_alex_v0.1.pth")
     flags = [
-        "--seed", str(seed), "--max-num-iterations", "800", *GRID_FLAGS[:-2], "--steps-per-save", str(EVAL_EVERY),
+        "--seed", str(seed), "--max-num-iterations", "800", *GRID_FLAGS, "--steps-per-save", str(EVAL_EVERY),
         "--keep-checkpoints", "0", "--log-every", str(EVAL_EVERY // 2), *OFFICIAL_OPTIMISER, *PCPU_LEGO_PARSER,
     ]  # fmt: skip
     cmd = train_cmd("fourierf-vm", shared / "data/blender/lego", out, "run", *flags)
@@ -126,26 +125,24 @@ def section(rows: list[dict]) -> list[str]:
 def main() -> None:
     ap = arguments(__doc__, "bench_pcpu_vs_reference")
     ap.add_argument("--seeds", type=int, nargs="+", default=[20211202, 1, 2])
-    ap.add_argument("--report-only", action="store_true")
     args = ap.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
-    results = args.work / "results.jsonl"
+    results, peer = args.work / "results.jsonl", args.shared / "peer"
     rows = read_jsonl(results)
-    done, peer = {r["seed"] for r in rows}, args.shared / "peer"
-    if not args.report_only:
-        if not (peer / "run_pcpu.sh").is_file():
-            sys.exit(f"error: {peer} has no run_pcpu.sh; pass --shared PATH_TO_SHARED")
-        for i, seed in enumerate(s for s in args.seeds if s not in done):
-            row: dict = {"seed": seed}
-            for side in ("reference", "ours") if i % 2 == 0 else ("ours", "reference"):
-                print(f"seed {seed}: {side} ...", flush=True)
-                if side == "reference":
-                    row[side] = reference_run(peer, seed, args.work / f"reference-{seed}.log")
-                else:
-                    row[side] = our_run(args.shared, seed, args.work)
-            rows.append(row)
-            with results.open("a") as fh:
-                fh.write(json.dumps(row) + "\n")
+    todo = [s for s in args.seeds if s not in {r["seed"] for r in rows}]
+    if todo and not (peer / "run_pcpu.sh").is_file():
+        sys.exit(f"error: {peer} has no run_pcpu.sh; pass --shared PATH_TO_SHARED")
+    for i, seed in enumerate(todo):
+        row: dict = {"seed": seed}
+        for side in ("reference", "ours") if i % 2 == 0 else ("ours", "reference"):
+            print(f"seed {seed}: {side} ...", flush=True)
+            if side == "reference":
+                row[side] = reference_run(peer, seed, args.work / f"reference-{seed}.log")
+            else:
+                row[side] = our_run(args.shared, seed, args.work)
+        rows.append(row)
+        with results.open("a") as fh:
+            fh.write(json.dumps(row) + "\n")
     write_section(args.markdown, "pcpu-vs-reference", "pcpu_vs_reference.py", section(rows))
 
 

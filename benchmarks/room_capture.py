@@ -43,6 +43,7 @@ TARGETS = {"8": 22.0, "all": 28.0}
 CROP_PADDING = 0.1
 """The mesh is scored inside the true object's box grown by this share of its size on each side."""
 PICTURE_VIEWS = 2
+PICTURE, RESULTS = Path("docs/room_capture.png"), REPO / "benchmarks" / "results" / "room_capture" / "results.jsonl"
 NO_MESH = {"chamfer": None, "mesh_to_truth": None, "truth_to_mesh": None}
 
 
@@ -151,24 +152,20 @@ def main() -> None:
     ap = arguments(__doc__, "bench_room_capture")
     ap.add_argument("--seed", type=int, default=20211202)
     ap.add_argument("--threads", type=int, default=None)
-    ap.add_argument("--results", type=Path, default=REPO / "benchmarks" / "results" / "room_capture" / "results.jsonl")
-    ap.add_argument("--picture", type=Path, default=REPO / "docs" / "room_capture.png")
     args = ap.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
-    args.results.parent.mkdir(parents=True, exist_ok=True)
     room = args.work / "room"
     if not (room / "transforms.json").is_file():
         subprocess.run([str(BIN / "fourierf-synth"), "--output-dir", str(room), "--kind", "room"], check=True)
     lpips = args.shared / "lpips" / "lpips_alex_v0.1.pth"
     plan = [Run(m, 0, args.seed, v) for v in VIEWS for m in METHODS]
     run_all([Job(r.key, args.work / r.key, partial(execute, r, room, args.work, lpips, args.threads)) for r in plan],
-            args.results)  # fmt: skip
-    rows = {f"{r['method']}_{r['views']}": r for r in load_results(args.results).values() if r["seed"] == args.seed}
+            RESULTS)  # fmt: skip
+    rows = {f"{r['method']}_{r['views']}": r for r in load_results(RESULTS).values() if r["seed"] == args.seed}
     if len(rows) < len(plan):
         sys.exit(f"error: {len(plan) - len(rows)} runs failed (their logs are under {args.work}); run again")
-    picture(rows, room, args.work, args.threads, args.picture)
-    link = args.picture.relative_to(REPO) if args.picture.is_relative_to(REPO) else args.picture
-    write_section(args.markdown, "room-capture", "room_capture.py", section(rows, args.seed, link))
+    picture(rows, room, args.work, args.threads, REPO / PICTURE)
+    write_section(args.markdown, "room-capture", "room_capture.py", section(rows, args.seed, PICTURE))
 
 
 if __name__ == "__main__":

@@ -2,9 +2,9 @@
 
 The budget picks ``max_num_iterations`` before the short-run rules are applied (as if the user had typed it), so the
 count it picks decides which rules apply, and every schedule stays a fraction of the run. The cost of an iteration
-comes from timing a few real steps of the configured pipeline on a throwaway copy, on the run's first grid and on its
-last (``measure_steps``), spread over the run by ``estimates.run_mean_seconds``; the budget covers the training loop
-only (setup, this timing and evaluation come on top).
+comes from timing a few real steps of the configured pipeline on a throwaway copy (``measure_first_steps``), scaled
+to the whole run by ``estimates.run_shape``; the budget covers the training loop only (setup, this timing and
+evaluation come on top).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 
 import torch
 
-from fourierf_plugin.engine.estimates import checkpoint_bytes, mean_rays_per_batch, run_mean_seconds, save_seconds
+from fourierf_plugin.engine.estimates import checkpoint_bytes, mean_rays_per_batch, run_shape, save_seconds
 from fourierf_plugin.engine.machine import pick_device, seed_everything
 from fourierf_plugin.engine.optimizers import build_optimizer
 from fourierf_plugin.engine.trainer import TrainerConfig, optimisation_step
@@ -34,7 +34,7 @@ MARGIN = 0.05
 MIN_ITERATIONS = 100
 """The shortest run a budget may pick: below it the schedules' events crowd together and the field barely forms."""
 WARMUP_STEPS, TIMED_STEPS = 2, 8
-"""Steps of the calibration copy run before timing (allocations, first-call costs) and then timed, on each grid."""
+"""Steps of the calibration copy run before timing (allocations, first-call costs) and then timed."""
 MAX_ROUNDS = 4
 """Calibrations at most: a count that changes which short-run rules apply is timed again with those rules."""
 
@@ -57,7 +57,7 @@ def parse_duration(text: str) -> float:
 @dataclass(frozen=True)
 class StepCost:
     """What a run of ``n`` iterations costs: ``n`` iterations at ``seconds_per_iteration`` (the run's average, the
-    occupancy updates, upsamples and ray filtering included through ``run_mean_seconds``) plus one checkpoint every
+    occupancy updates, upsamples and ray filtering included through ``run_shape``) plus one checkpoint every
     ``steps_per_save`` iterations and one at the end, each ``seconds_per_save``."""
 
     seconds_per_iteration: float
@@ -102,56 +102,35 @@ def at_mean_batch(config: TrainerConfig) -> TrainerConfig:
     return timed
 
 
-@dataclass(frozen=True)
-class StepTimes:
-    """Seconds per iteration timed on a run's first grid and on its last (the same where the grid never grows)."""
-
-    first_s: float
-    last_s: float
-
-
-def measure_steps(config: TrainerConfig, warmup: int = WARMUP_STEPS, steps: int = TIMED_STEPS) -> StepTimes:
-    """``steps`` real iterations of ``config``'s pipeline (a finished config) at its mean batch, after ``warmup``
-    untimed ones, on a throwaway copy built on the run's device and threads: the run's first steps, then, on its last
-    grid, steps of its last stretch. The trainer seeds itself again, so the run it starts afterwards is the same."""
+def measure_first_steps(config: TrainerConfig, warmup: int = WARMUP_STEPS, steps: int = TIMED_STEPS) -> float:
+    """Seconds per iteration of ``steps`` real iterations of ``config``'s pipeline (a finished config) at its mean
+    batch, after ``warmup`` untimed ones, on a throwaway copy built on the run's device and threads; the trainer
+    seeds itself again, so the run it starts afterwards is the same as without this."""
     config = at_mean_batch(config)
     if config.threads is not None:
         torch.set_num_threads(config.threads)
+    device = pick_device(config.device)
     pipeline = config.pipeline.setup(
-        device=pick_device(config.device), max_iters=config.max_num_iterations, generator=seed_everything(config.seed)
+        device=device, max_iters=config.max_num_iterations, generator=seed_everything(config.seed)
     )
-    model = pipeline.model
-    reset_steps = [s + 1 for s in model.reset_steps()]
-    optimizer = build_optimizer(config.optimizer, model.param_groups(), 0, reset_steps)
-
-    def seconds_per_step(run_steps: list[int]) -> float:
-        nonlocal optimizer
-        started = 0.0
-        for index, step in enumerate(run_steps):
-            if index == warmup:
-                started = time.perf_counter()
-            optimizer, metrics, _ = optimisation_step(
-                pipeline, optimizer, config.optimizer, step, reset_steps, config.max_num_iterations
-            )
-            pipeline.read_metrics(metrics)  # waits for the device
-        return (time.perf_counter() - started) / steps
-
-    first_s = seconds_per_step(list(range(warmup + steps)))
-    if not model.grow_to_last_grid():
-        return StepTimes(first_s, first_s)
-    optimizer = build_optimizer(config.optimizer, model.param_groups(), 0, reset_steps)
-    structure = set(model.upsample_steps) | set(model.occupancy_steps)  # steps whose structure change is not timed
-    last_stretch = [s for s in range(config.max_num_iterations - 1, 0, -1) if s not in structure]
-    return StepTimes(first_s, seconds_per_step(sorted(last_stretch[: warmup + steps])))
+    reset_steps = [s + 1 for s in pipeline.model.reset_steps()]
+    optimizer = build_optimizer(config.optimizer, pipeline.model.param_groups(), 0, reset_steps)
+    started = 0.0
+    for step in range(warmup + steps):
+        if step == warmup:
+            started = time.perf_counter()
+        optimizer, metrics, _ = optimisation_step(
+            pipeline, optimizer, config.optimizer, step, reset_steps, config.max_num_iterations
+        )
+        pipeline.read_metrics(metrics)  # waits for the device
+    return (time.perf_counter() - started) / steps
 
 
-def run_cost(config: TrainerConfig, times: StepTimes) -> StepCost:
-    """The cost of ``config``'s run from the seconds per iteration timed on its first and last grids."""
+def run_cost(config: TrainerConfig, first_steps_s: float) -> StepCost:
+    """The cost of ``config``'s run from its first steps' measured seconds per iteration."""
     rays = config.pipeline.datamanager.rays_per_batch  # the checkpoint's ray state is small beside its grid
     return StepCost(
-        run_mean_seconds(config, times.first_s, times.last_s),
-        save_seconds(checkpoint_bytes(config, rays)),
-        config.steps_per_save,
+        first_steps_s * run_shape(config), save_seconds(checkpoint_bytes(config, rays)), config.steps_per_save
     )
 
 
@@ -169,7 +148,7 @@ class Plan:
     def describe(self, text: str) -> str:
         return (
             f"time budget {text} ({format_duration(self.budget_s)}): ~{self.cost.seconds_per_iteration:.3g} s per "
-            f"iteration (timed over {TIMED_STEPS} steps of this run's pipeline on its first grid and on its last), so "
+            f"iteration (timed over {TIMED_STEPS} steps of this run's pipeline, scaled to the whole run), so "
             f"max_num_iterations={self.iterations}, planned training time {format_duration(self.planned_s)}; the "
             f"budget covers training only: setup, this timing ({format_duration(self.calibration_s)}) and evaluation "
             "are not included"
@@ -180,16 +159,16 @@ def plan_run(
     config: TrainerConfig,
     finish: Callable[[TrainerConfig], object],
     background: str = "white",
-    measure: Callable[[TrainerConfig], StepTimes] | None = None,
+    measure: Callable[[TrainerConfig], float] | None = None,
 ) -> Plan:
     """The plan for ``config``'s ``--time-budget``: ``finish`` completes a copy set to a trial count the way
     ``finalize`` completes the run (short-run rules, scene effects); the copy is timed with ``measure`` (default
-    ``measure_steps``). A count is only planned from the cost of a copy under the same short-run rules (a rule
+    ``measure_first_steps``). A count is only planned from the cost of a copy under the same short-run rules (a rule
     can change an iteration's cost), so a count that falls under other rules is timed again under those; where the
     rules' ranges and the costs disagree, the plan is the longest run that fits under rules that were timed."""
     assert config.time_budget is not None
     budget_s = parse_duration(config.time_budget)
-    measure = measure or measure_steps
+    measure = measure or measure_first_steps
     started = time.perf_counter()
     iterations, timed_spans, fits = config.max_num_iterations, set(), []
     for _ in range(MAX_ROUNDS):

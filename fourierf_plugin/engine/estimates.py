@@ -66,6 +66,11 @@ def estimate_seconds(config: Any, threads: int) -> float:
     return config.max_num_iterations * per_iteration * 2.0 / max(1, threads)
 
 
+RUN_TO_GROWTH = 0.9
+"""A run's average cost per iteration over its first iterations' cost times the grid's growth (``grid_growth``): what
+the growth leaves out (the field lights up, the occupancy updates shrink the box and filter the rays), fitted on an
+object and a forward-facing scene at the CPU sizing; an estimate, which ``time_budget.MARGIN`` covers."""
+
 SAVE_BYTES_PER_SECOND = 200e6
 """How fast a checkpoint is written (serialised and flushed to disk): an estimate for a local disk."""
 
@@ -82,19 +87,9 @@ def grid_growth(config: Any) -> float:
     return total / iterations
 
 
-RUN_TO_TIMED = 1.0
-"""A run's mean cost per iteration over the one ``run_mean_seconds`` interpolates from the timed grids: what the two
-timings leave out (the field lighting up, the occupancy updates shrinking the box and filtering the rays); an
-estimate, which ``time_budget.MARGIN`` covers."""
-
-
-def run_mean_seconds(config: Any, first_s: float, last_s: float) -> float:
-    """A run's mean seconds per iteration from those timed on its first grid and on its last: linear in the grid's
-    side (a ray's samples grow with it) along the upsample schedule, times ``RUN_TO_TIMED``."""
-    field = config.pipeline.model.field
-    first_side, last_side = field.n_voxels_init ** (1 / 3), field.n_voxels_final ** (1 / 3)
-    share = 0.0 if last_side <= first_side else (grid_growth(config) - 1.0) * first_side / (last_side - first_side)
-    return (first_s + (last_s - first_s) * min(max(share, 0.0), 1.0)) * RUN_TO_TIMED
+def run_shape(config: Any) -> float:
+    """A run's average cost per iteration over the cost of its first iterations (what ``--time-budget`` times)."""
+    return grid_growth(config) * RUN_TO_GROWTH
 
 
 def save_seconds(size_bytes: float) -> float:

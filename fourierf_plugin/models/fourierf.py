@@ -425,17 +425,6 @@ class FourieRFModel(nn.Module):
             self.field.invalidate()
         return changes
 
-    @torch.no_grad()
-    def grow_to_last_grid(self) -> bool:
-        """Every upsample of the run at once, without an occupancy update: the grid the run ends on, so that
-        ``--time-budget`` can time its last stretch. Whether the grid grew (the optimiser is then rebuilt)."""
-        if not self.upsample_steps:
-            return False
-        self.prepare(self.upsample_steps[-1] + 1)
-        self._upsample(schedules.n_to_reso(self.voxel_targets[-1], self._box_size()))
-        self.field.invalidate()
-        return True
-
     def _dense_alpha(self, reso: list[int], chunk: int = 65536) -> Tensor:
         """Alpha 1 - exp(-σ step) at the grid vertices (TensoRF's mask criterion, no distance scale)."""
         xyz = vertex_grid(self.aabb, reso).reshape(-1, 3)

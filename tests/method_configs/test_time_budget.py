@@ -3,9 +3,6 @@ that the count a budget picks feeds the short-run rules as a typed ``--max-num-i
 
 from __future__ import annotations
 
-import copy
-import math
-
 import pytest
 
 from fourierf_plugin.method_configs import finalize, time_budget
@@ -86,11 +83,6 @@ def test_a_bad_budget_fails_before_the_scene_is_read():
         build_config(parse_args(args), given_options(args))
 
 
-def steady(seconds: float) -> time_budget.StepTimes:
-    """The same seconds per iteration on the first grid and on the last."""
-    return time_budget.StepTimes(seconds, seconds)
-
-
 def per_iteration_for(iterations: int, budget_s: float) -> float:
     """A measured cost per iteration at which ``budget_s`` plans ``iterations`` exactly (checkpoint saves aside)."""
     return budget_s * (1 - MARGIN) / (iterations + 0.5)
@@ -101,14 +93,14 @@ def test_the_budgets_count_feeds_the_rules_like_a_typed_one(monkeypatch, iterati
     """With a mocked cost, a budget that gives N iterations sets what ``--max-num-iterations N`` sets, the budget's
     own fields aside."""
     monkeypatch.setattr(time_budget, "save_seconds", lambda size: 0.0)
-    monkeypatch.setattr(time_budget, "run_mean_seconds", lambda config, first_s, last_s: first_s)
+    monkeypatch.setattr(time_budget, "run_shape", lambda config: 1.0)
     timed = []
 
     def measure(config):
         timed.append(config.max_num_iterations)
-        return steady(per_iteration_for(iterations, 600.0))
+        return per_iteration_for(iterations, 600.0)
 
-    monkeypatch.setattr(time_budget, "measure_steps", measure)
+    monkeypatch.setattr(time_budget, "measure_first_steps", measure)
     args = ["fourierf-vm", "--data", str(TINY_SCENE), "--device", "cpu"]
     budgeted, notes = finalize(parse_args([*args, "--time-budget", "10m"]), given_options([*args, "--time-budget"]))
     typed_args = [*args, "--max-num-iterations", str(iterations)]
@@ -127,7 +119,7 @@ def test_the_budgets_count_feeds_the_rules_like_a_typed_one(monkeypatch, iterati
 def test_the_budget_is_recorded_and_the_estimate_line_shows_the_plan(monkeypatch):
     from fourierf_plugin.engine.estimates import describe_cost
 
-    monkeypatch.setattr(time_budget, "measure_steps", lambda config: steady(0.05))
+    monkeypatch.setattr(time_budget, "measure_first_steps", lambda config: 0.05)
     args = ["fourierf-vm", "--data", str(TINY_SCENE), "--device", "cpu", "--time-budget", "90s"]
     config, _ = finalize(parse_args(args), given_options(args))
     assert config.time_budget == "90s" and 0 < config.planned_train_seconds <= 90 * (1 - MARGIN)
@@ -140,7 +132,7 @@ def test_a_count_is_planned_only_from_a_cost_timed_under_its_own_rules(monkeypat
     from fourierf_plugin.method_configs.budget import Run, rule_span
 
     monkeypatch.setattr(time_budget, "save_seconds", lambda size: 0.0)
-    monkeypatch.setattr(time_budget, "run_mean_seconds", lambda config, first_s, last_s: first_s)
+    monkeypatch.setattr(time_budget, "run_shape", lambda config: 1.0)
     args = ["fourierf-vm", "--data", str(TINY_SCENE), "--device", "cpu"]
     short = finalize(parse_args([*args, "--max-num-iterations", "500"]), given_options(args))[0]
     boundary = rule_span(Run.of(short, "white"))[1]  # the first count under the longer runs' rules
@@ -148,9 +140,9 @@ def test_a_count_is_planned_only_from_a_cost_timed_under_its_own_rules(monkeypat
     dear, cheap = per_iteration_for(boundary // 2, 600.0), per_iteration_for(boundary * 2, 600.0)
 
     def measure(config):
-        return steady(dear if config.max_num_iterations >= boundary else cheap)
+        return dear if config.max_num_iterations >= boundary else cheap
 
-    monkeypatch.setattr(time_budget, "measure_steps", measure)
+    monkeypatch.setattr(time_budget, "measure_first_steps", measure)
     budgeted, _ = finalize(parse_args([*args, "--time-budget", "10m"]), given_options([*args, "--time-budget"]))
     assert budgeted.max_num_iterations == boundary - 1
     assert budgeted.planned_train_seconds == pytest.approx((boundary - 1) * cheap)
@@ -158,6 +150,10 @@ def test_a_count_is_planned_only_from_a_cost_timed_under_its_own_rules(monkeypat
 
 def test_a_growing_batch_is_timed_at_its_mean_and_a_fixed_one_as_it_is():
     from fourierf_plugin.engine.estimates import mean_rays_per_batch
+
+    def finished(method: str):
+        args = [method, "--data", str(TINY_SCENE), "--device", "cpu"]
+        return finalize(parse_args(args), given_options(args))[0]
 
     zerorf = finished("zerorf-vm")
     timed = time_budget.at_mean_batch(zerorf)
@@ -167,47 +163,3 @@ def test_a_growing_batch_is_timed_at_its_mean_and_a_fixed_one_as_it_is():
     assert timed.pipeline.datamanager.rays_per_batch > zerorf.pipeline.datamanager.rays_per_batch
     fourierf = finished("fourierf-vm")
     assert time_budget.at_mean_batch(fourierf) is fourierf
-
-
-def finished(method: str, *flags: str):
-    args = [method, "--data", str(TINY_SCENE), "--device", "cpu", *flags]
-    return finalize(parse_args(args), given_options(args))[0]
-
-
-def test_the_run_mean_lies_between_the_timed_grids_and_follows_the_upsamples():
-    from fourierf_plugin.engine.estimates import RUN_TO_TIMED, run_mean_seconds
-
-    config = finished("fourierf-vm", "--max-num-iterations", "800")
-    mean = run_mean_seconds(config, 1.0, 3.0) / RUN_TO_TIMED
-    assert 1.0 < mean < 3.0
-    assert run_mean_seconds(config, 2.0, 2.0) == pytest.approx(2.0 * RUN_TO_TIMED)
-    early, late = copy.deepcopy(config), copy.deepcopy(config)
-    early.pipeline.model.field.upsample_fractions = (0.01, 0.02)
-    late.pipeline.model.field.upsample_fractions = (0.98, 0.99)
-    assert run_mean_seconds(late, 1.0, 3.0) < mean * RUN_TO_TIMED < run_mean_seconds(early, 1.0, 3.0)
-    flat = copy.deepcopy(config)
-    flat.pipeline.model.field.n_voxels_final = flat.pipeline.model.field.n_voxels_init
-    assert run_mean_seconds(flat, 1.0, 3.0) == pytest.approx(RUN_TO_TIMED)
-
-
-def test_the_calibration_times_the_first_grid_and_the_last(monkeypatch):
-    """The throwaway copy runs on the run's first grid, then on the grid it ends on, at steps of its last stretch."""
-    from fourierf_plugin.models.fourierf import FourieRFModel
-
-    grown = []
-    original = FourieRFModel.grow_to_last_grid
-
-    def grow(model):
-        before = model.field.resolution
-        changed = original(model)
-        grown.append((before, model.field.resolution, changed))
-        return changed
-
-    monkeypatch.setattr(FourieRFModel, "grow_to_last_grid", grow)
-    config = finished("fourierf-vm", "--max-num-iterations", "120")
-    times = time_budget.measure_steps(config, warmup=1, steps=1)
-    assert times.first_s > 0 and times.last_s > 0
-    ((before, after, changed),) = grown
-    field = config.pipeline.model.field
-    assert changed and math.prod(after) > math.prod(before)
-    assert math.prod(after) == pytest.approx(field.n_voxels_final, rel=0.15)

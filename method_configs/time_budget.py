@@ -151,7 +151,7 @@ class Plan:
             f"iteration (timed over {TIMED_STEPS} steps of this run's pipeline, scaled to the whole run), so "
             f"max_num_iterations={self.iterations}, planned training time {format_duration(self.planned_s)}; the "
             f"budget covers training only: setup, this timing ({format_duration(self.calibration_s)}) and evaluation "
-            "are not included"
+            "are not included; should its iterations cost more than planned, training stops and saves at the budget"
         )
 
 
@@ -210,4 +210,5 @@ def apply_time_budget(
     plan = plan_run(config, finish, background)
     config.max_num_iterations = plan.iterations
     config.planned_train_seconds = plan.planned_s
+    config.train_deadline_seconds = plan.budget_s - plan.cost.seconds_per_save  # the last checkpoint inside it
     return [plan.describe(config.time_budget)]

@@ -317,6 +317,12 @@ class Trainer:
         finally:
             self.run_lock.release()
 
+    def _past_deadline(self, elapsed: float) -> bool:
+        """Whether a --time-budget run has used its training time (a resumed run has no deadline: its time before the
+        stop is not known here)."""
+        deadline = self.config.train_deadline_seconds
+        return deadline is not None and not self.start_step and elapsed >= deadline
+
     def _train(self) -> Path:
         c = self.config
         model = self.pipeline.model
@@ -336,6 +342,7 @@ class Trainer:
         # On the GPU paths the metrics are read from the device once per log interval, not every step.
         read_every_step = not uses_gpu_paths(c.pipeline.model.accel, self.device)
         shown: dict[str, float] = {}
+        cut_at_budget = False
         notify_started(self.observers, self.pipeline, self.run_dir, self.start_step)
         with _DeferredStop() as interrupt, TaskProgress(c.max_num_iterations, self.start_step) as progress:
             for step in range(self.start_step, c.max_num_iterations):
@@ -371,9 +378,16 @@ class Trainer:
                     self._export_mesh(done)
                 if interrupt.requested:
                     break
+                if self._past_deadline(time.perf_counter() - started):
+                    cut_at_budget = done < c.max_num_iterations
+                    break
         elapsed = time.perf_counter() - started
-        notify_finished(self.observers, self.pipeline, done, interrupted=done < c.max_num_iterations)
-        if done < c.max_num_iterations:
+        notify_finished(
+            self.observers, self.pipeline, done, interrupted=done < c.max_num_iterations and not cut_at_budget
+        )
+        if cut_at_budget:
+            self.save(done, optimizer)
+        elif done < c.max_num_iterations:
             path = self.save(done, optimizer)
             name = signal.Signals(interrupt.exit_code - 128).name
             self.console.print(f"stopped by {name} at step {done}: saved {path}")
@@ -382,6 +396,8 @@ class Trainer:
         done_record = {"event": "done", "step": done, "train_seconds": elapsed}
         if c.planned_train_seconds is not None:
             done_record["planned_train_seconds"] = c.planned_train_seconds
+        if cut_at_budget:
+            done_record["planned_iterations"] = c.max_num_iterations
         if self.device.type == "cuda":
             done_record["peak_device_memory_gb"] = torch.cuda.max_memory_allocated(self.device) / 2**30
         if timer is not None:
@@ -397,6 +413,12 @@ class Trainer:
             self.console.print(
                 f"time budget {c.time_budget}: planned training time {format_duration(planned)}, actual "
                 f"{format_duration(elapsed)} ({elapsed / planned - 1:+.0%})"
+            )
+        if cut_at_budget:
+            self.console.print(
+                f"[yellow]time budget {c.time_budget} reached after {done} of the {c.max_num_iterations} planned "
+                f"iterations:[/yellow] training stopped and saved there, before the end of its schedules; resume with "
+                f"--load-dir {self.run_dir} to finish them"
             )
         if shown.get("revived_batches"):
             self.console.print(f"a dead density field was revived on {shown['revived_batches']:.0f} training batches")
@@ -467,7 +489,11 @@ class TrainerConfig(InstantiateConfig):
     (docs/defaults.md, one section per rule); False keeps the preset's values at any budget."""
     time_budget: str | None = None
     """Train for this long (90s, 5m, 1.5h, 1h30m) instead of a set iteration count: timing a few steps first, the
-    run picks the count that ends training within it (setup and evaluation not included); every schedule stays a
-    fraction of the run. Not with --max-num-iterations, nor on resume."""
+    run picks the count that ends training within it (setup and evaluation not included), and stops there should the
+    iterations cost more than planned; every schedule stays a fraction of the run. Not with --max-num-iterations, nor
+    on resume."""
     planned_train_seconds: tyro.conf.Suppress[float | None] = None
     """The training time a --time-budget run planned (set by finalize), compared with the actual one at the end."""
+    train_deadline_seconds: tyro.conf.Suppress[float | None] = None
+    """A --time-budget run's training stops and saves here, iterations left or not: an iteration's cost follows the
+    field's state (lit, pruned), so the plan is an estimate and the budget a promise."""

@@ -107,7 +107,7 @@ def test_the_budgets_count_feeds_the_rules_like_a_typed_one(monkeypatch, iterati
     typed, typed_notes = finalize(parse_args(typed_args), given_options(typed_args))
     assert budgeted.max_num_iterations == iterations
     assert budgeted.planned_train_seconds == pytest.approx(iterations * per_iteration_for(iterations, 600.0))
-    budgeted.time_budget, budgeted.planned_train_seconds = None, None
+    budgeted.time_budget, budgeted.planned_train_seconds, budgeted.train_deadline_seconds = None, None, None
     assert budgeted == typed
     rest = [n for n in notes if not n.startswith(("time budget ", "run size "))]
     assert rest == [n for n in typed_notes if not n.startswith("run size ")]
@@ -163,3 +163,35 @@ def test_a_growing_batch_is_timed_at_its_mean_and_a_fixed_one_as_it_is():
     assert timed.pipeline.datamanager.rays_per_batch > zerorf.pipeline.datamanager.rays_per_batch
     fourierf = finished("fourierf-vm")
     assert time_budget.at_mean_batch(fourierf) is fourierf
+
+
+def test_a_run_past_its_deadline_stops_saves_and_says_so(tmp_path, capsys):
+    """The budget is a promise: a run whose iterations cost more than planned stops at its deadline, keeps a
+    checkpoint of that step and ends as a success that names the iterations it did not run."""
+    import json
+
+    from fourierf_plugin.engine.checkpoint import checkpoint_name, list_checkpoints
+    from fourierf_plugin.engine.trainer import Trainer
+    from tests.helpers import tiny_trainer_config
+
+    config = tiny_trainer_config(tmp_path, iters=30)
+    config.time_budget, config.train_deadline_seconds = "1s", 0.0  # past due after the first iteration
+    run_dir = Trainer(config).train()
+    done = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()][-1]
+    assert done["event"] == "done" and done["step"] == 1 and done["planned_iterations"] == 30
+    assert list_checkpoints(run_dir / "checkpoints")[-1].name == checkpoint_name(1)
+    said = " ".join(capsys.readouterr().out.split())  # the console wraps long lines
+    assert "reached after 1 of the 30 planned iterations" in said
+
+
+def test_a_run_within_its_deadline_runs_every_iteration(tmp_path):
+    import json
+
+    from fourierf_plugin.engine.trainer import Trainer
+    from tests.helpers import tiny_trainer_config
+
+    config = tiny_trainer_config(tmp_path, iters=12)
+    config.time_budget, config.train_deadline_seconds = "1h", 3600.0
+    run_dir = Trainer(config).train()
+    done = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()][-1]
+    assert done["step"] == 12 and "planned_iterations" not in done

@@ -131,6 +131,7 @@ def execute(point: Point, suite: Suite, data: Path, work: Path, lpips: Path, job
     iterations, seconds = int(done["step"]), float(done["train_seconds"])
     return row | {
         "planned_seconds": done.get("planned_train_seconds"), "trained_seconds": seconds, "iterations": iterations,
+        "planned_iterations": done.get("planned_iterations", iterations),
         "seconds_per_iteration": seconds / iterations, "psnr": trained["psnr"], "ssim": trained["ssim"],
         "lpips": trained["lpips"], "train_threads": trained["train_threads"],
         "train_view_ids": trained["train_view_ids"], "run_dir": trained["run_dir"],

@@ -479,6 +479,17 @@ def equal_time_section(rows: Sequence[dict], suite: Suite) -> list[str]:
     if off:
         spread = f"{min(off):+.0%}" + (f" to {max(off):+.0%}" if len(off) > 1 else "")
         body += [f"Actual against planned training time: {spread} over the {len(off)} trained points.", ""]
+    cut = [
+        r["iterations"] / r["planned_iterations"]
+        for r in rows
+        if r.get("planned_iterations", 0) > r.get("iterations", 0)
+    ]
+    if cut:
+        body += [
+            f"Points stopped at their budget before the end of their schedules: {len(cut)}, after {min(cut):.0%} to "
+            f"{max(cut):.0%} of their planned iterations (those cost more than the opening steps timed).",
+            "",
+        ]
     body += speed_table(rows, suite)
     body += [stage_time(rows), "", f"![test PSNR against training time, log axis]({FIGURE})", ""]
     return body

@@ -154,6 +154,16 @@ def test_the_section_states_its_command_and_how_long_the_stage_took() -> None:
     assert "No points" in "\n".join(rep.equal_time_section([], SUITE))
 
 
+def test_points_stopped_at_their_budget_are_counted_with_the_share_of_their_schedule() -> None:
+    assert "stopped at their budget" not in "\n".join(rep.equal_time_section(ROWS, SUITE))
+    cut = [
+        ROWS[0] | {"iterations": 300, "planned_iterations": 600},
+        ROWS[1] | {"planned_iterations": ROWS[1]["iterations"]},
+    ]
+    text = "\n".join(rep.equal_time_section(cut, SUITE))
+    assert "stopped at their budget before the end of their schedules: 1, after 50% to 50% of their planned" in text
+
+
 def test_the_figure_is_svg_with_one_line_per_method_per_scene() -> None:
     root = ET.fromstring(rep.figure(ROWS, SUITE))
     lines = root.findall("{http://www.w3.org/2000/svg}polyline")

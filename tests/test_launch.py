@@ -21,6 +21,12 @@ def entrypoint():
 """
 
 
+def _signals_as_in_a_terminal() -> None:
+    """The child starts with SIGINT not ignored, as from a terminal: a job started in the background by a shell
+    inherits it ignored, and Python then keeps it so."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def start(tmp_path: Path, load_seconds: float) -> subprocess.Popen:
     (tmp_path / "slow_script.py").write_text(textwrap.dedent(SLOW_SCRIPT))
     code = "from fourierf_plugin.launch import launch; launch('slow_script', 'fourierf-slow')"
@@ -31,6 +37,7 @@ def start(tmp_path: Path, load_seconds: float) -> subprocess.Popen:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=_signals_as_in_a_terminal,
     )
 
 

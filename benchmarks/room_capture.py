@@ -101,6 +101,11 @@ def picture(rows: dict[str, dict], room: Path, work: Path, threads: int | None, 
     for method in METHODS:
         row = rows[f"{method}_8"]
         folders[method] = work / f"{row['key']}_renders"
+        if not (Path(row["run_dir"]) / "config.json").is_file():
+            sys.exit(
+                f"error: the recorded run {row['run_dir']} is not on this machine, so its views cannot be pictured; "
+                f"move {RESULTS} aside to train the runs again"
+            )
         if not folders[method].is_dir():
             cmd = [
                 str(BIN / "fourierf-render"), "dataset", "--load-config", str(Path(row["run_dir"]) / "config.json"),

@@ -382,12 +382,11 @@ class Trainer:
                     cut_at_budget = done < c.max_num_iterations
                     break
         elapsed = time.perf_counter() - started
-        notify_finished(
-            self.observers, self.pipeline, done, interrupted=done < c.max_num_iterations and not cut_at_budget
-        )
-        if cut_at_budget:
+        stopped_by_signal = done < c.max_num_iterations and not cut_at_budget
+        notify_finished(self.observers, self.pipeline, done, interrupted=stopped_by_signal)
+        if cut_at_budget and done % c.steps_per_save:  # a step on the save schedule was saved in the loop
             self.save(done, optimizer)
-        elif done < c.max_num_iterations:
+        elif stopped_by_signal:
             path = self.save(done, optimizer)
             name = signal.Signals(interrupt.exit_code - 128).name
             self.console.print(f"stopped by {name} at step {done}: saved {path}")

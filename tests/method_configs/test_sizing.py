@@ -13,7 +13,7 @@ from fourierf_plugin.data.parsers.llff import NDC_BOX
 from fourierf_plugin.engine.estimates import checkpoint_bytes, describe_cost, estimate_seconds
 from fourierf_plugin.field_components.schedules import n_to_reso
 from fourierf_plugin.method_configs import all_methods, finalize
-from fourierf_plugin.method_configs.sizing import CPU_SIDE, GPU, run_size
+from fourierf_plugin.method_configs.sizing import CPU_SIDE, DENSE_FACTOR, FEW_SHOT_VIEWS, GPU, run_size
 from fourierf_plugin.scripts.train import parse_args
 from tests.helpers import TINY_SCENE
 from tests.scenes import write_llff_scene
@@ -84,3 +84,20 @@ def test_finalize_gives_a_forward_facing_scene_on_a_gpu_the_llff_grid(monkeypatc
     assert config.pipeline.model.field.n_voxels_final == 200**3, "a flag always wins"
     blender, _ = finalize(parse_args(["fourierf-vm", "--data", str(TINY_SCENE)]))
     assert blender.pipeline.model.field.n_voxels_final == 300**3, "a bounded scene keeps the paper's grid"
+
+
+@pytest.mark.parametrize("device", [CPU, CUDA])
+def test_a_few_shot_capture_gets_the_few_shot_count_and_a_dense_one_grows_to_tensorfs(device) -> None:
+    few_shot = run_size(FEW_SHOT_VIEWS, 100, 100, device).iterations
+    assert all(run_size(views, 100, 100, device).iterations == few_shot for views in range(1, FEW_SHOT_VIEWS + 1))
+    counts = [run_size(views, 100, 100, device).iterations for views in range(FEW_SHOT_VIEWS, 60)]
+    assert counts == sorted(counts), "never fewer iterations for more views"
+    assert run_size(2 * FEW_SHOT_VIEWS, 100, 100, device).iterations == 2 * few_shot, "in proportion to the views"
+    assert run_size(1000, 100, 100, device).iterations == DENSE_FACTOR * few_shot, "capped"
+    assert "dense capture: 2x the few-shot count" in run_size(2 * FEW_SHOT_VIEWS, 100, 100, device).reason
+    assert "dense" not in run_size(FEW_SHOT_VIEWS, 100, 100, device).reason
+
+
+def test_a_full_blender_scene_on_a_gpu_gets_tensorfs_count() -> None:
+    """TensoRF's Blender config trains its 100 views 30000 iterations."""
+    assert run_size(100, 800, 800, CUDA).iterations == 30000

@@ -10,7 +10,7 @@ is only shown from where it was photographed. Every requested output (rgb, depth
 accumulation) is written as ``DIR/<output>/<frame>.png`` plus ``DIR/<output>.gif`` (and ``.mp4`` when the optional
 imageio-ffmpeg plugin is installed). Nothing already in a named ``--output-dir`` is replaced without
 ``--overwrite``, outputs are written beside their final names first and renamed into place when complete, and a
-folder another live render is writing is refused (``RENDER_LOCK``).
+folder another live render is writing is refused (``render_lock``).
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import os
 import shutil
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
@@ -467,23 +468,37 @@ def _output_dir(cfg: RenderConfig, run: LoadedRun, mode: str, made: NewDirs) -> 
     return claimed
 
 
-RENDER_LOCK = ".fourierf-render.lock"
-"""The lock file a render holds inside its output folder while it writes there (inside, not beside: ``.`` and ``/``
-have no name to put one beside)."""
+def render_lock(output: str) -> str:
+    """The lock file a render holds inside its output folder while it writes ``output`` there (one per output, so
+    renders of other outputs share the folder; inside, not beside: ``.`` and ``/`` have no name to put one beside)."""
+    return f".fourierf-render-{output}.lock"
 
 
-def lock_render_dir(output_dir: Path) -> RunLock:
-    """Take ``RENDER_LOCK`` in ``output_dir`` for this process: a folder another live render is writing is a clear
-    error naming its PID (two renders would replace each other's frames); the lock of a process that is gone is taken
-    over."""
+def lock_render_outputs(output_dir: Path, outputs: list[str]) -> list[RunLock]:
+    """Take ``render_lock`` of each of ``outputs`` in ``output_dir`` for this process: an output another live render
+    is writing there is a clear error naming its PID (two renders would replace each other's frames); the lock of a
+    process that is gone is taken over."""
 
-    def busy(who: str, pid: int | None) -> UserError:
-        return UserError(
-            f"--output-dir {output_dir} is being written by {who} (another fourierf-render)",
-            fix=f"wait for it to finish{f' (or stop it: kill {pid})' if pid else ''}, or choose another --output-dir",
-        )
+    def busy_with(name: str) -> Callable[[str, int | None], UserError]:
+        def busy(who: str, pid: int | None) -> UserError:
+            return UserError(
+                f"--output-dir {output_dir}: {name} is being written there by {who} (another fourierf-render)",
+                fix=f"wait for it to finish{f' (or stop it: kill {pid})' if pid else ''}, or choose another "
+                "--output-dir",
+            )
 
-    return hold_lock(Path(output_dir) / RENDER_LOCK, busy)
+        return busy
+
+    locks: list[RunLock] = []
+    try:
+        for name in sorted(outputs):
+            locks.append(hold_lock(Path(output_dir) / render_lock(name), busy_with(name)))
+    except UserError:
+        for lock in locks:
+            for lock in locks:
+                lock.release()
+        raise
+    return locks
 
 
 def _staging(final: Path) -> Path:
@@ -583,7 +598,7 @@ def render(cfg: RenderConfig) -> RenderResult:
     check_frame_fits(cameras.width, cameras.height, cfg.resolution_scale)
     with NewDirs() as made:  # a stopped render removes the folders it made and left empty, and only those
         output_dir = _output_dir(cfg, run, mode, made)
-        lock = lock_render_dir(output_dir)
+        locks = lock_render_outputs(output_dir, outputs)
         staged = {name: _staging(output_dir / name) for name in outputs}
         try:
             if not cfg.overwrite:  # checked again under the lock: a render that just finished may have filled it
@@ -604,7 +619,8 @@ def render(cfg: RenderConfig) -> RenderResult:
         finally:
             for folder in staged.values():
                 shutil.rmtree(folder, ignore_errors=True)
-            lock.release()
+            for lock in locks:
+                lock.release()
 
     for name in outputs:
         console.print(f"  {name}: {len(result.frames[name])} frames in {escape(str(output_dir / name))}/")

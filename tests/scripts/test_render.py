@@ -20,7 +20,7 @@ from PIL import Image, ImageSequence
 
 from fourierf_plugin.scripts import render as render_script
 from fourierf_plugin.scripts.cli import EXIT_USER_ERROR
-from fourierf_plugin.scripts.render import OUTPUT_NAMES, RENDER_LOCK, RenderOrbit, main, spiral_bounds
+from fourierf_plugin.scripts.render import OUTPUT_NAMES, RenderOrbit, main, render_lock, spiral_bounds
 from fourierf_plugin.utils.interrupt import Interrupted
 from tests.helpers import (
     REPO_ROOT,
@@ -237,15 +237,17 @@ def every_path(root: Path) -> set[str]:
     return {str(p.relative_to(root)) for p in root.rglob("*")}
 
 
-def hold_render_lock(out: Path) -> subprocess.Popen[str]:
-    """Another live process holding ``out``'s render lock the way a render does (an ``flock``, its PID inside)."""
+def hold_render_lock(out: Path, output: str = "rgb") -> subprocess.Popen[str]:
+    """Another live process holding the lock of ``output`` in ``out`` the way a render does (an ``flock``, its PID
+    inside)."""
     out.mkdir(parents=True, exist_ok=True)
     code = (
         "import fcntl, os, sys, time; fd = os.open(sys.argv[1], os.O_RDWR | os.O_CREAT); "
         "fcntl.flock(fd, fcntl.LOCK_EX); os.write(fd, f'{os.getpid()}\\n'.encode()); print('held', flush=True); "
         "time.sleep(60)"
     )
-    holder = subprocess.Popen([sys.executable, "-c", code, str(out / RENDER_LOCK)], stdout=subprocess.PIPE, text=True)
+    holder = subprocess.Popen([sys.executable, "-c", code, str(out / render_lock(output))], stdout=subprocess.PIPE,
+                              text=True)  # fmt: skip
     assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
     return holder
 
@@ -262,16 +264,28 @@ def test_a_folder_another_live_render_is_writing_is_refused_naming_its_pid(
         holder.wait()
     err = " ".join(capsys.readouterr().err.split())
     assert code == EXIT_USER_ERROR and "Traceback" not in err, err
-    assert f"--output-dir {out} is being written by process {holder.pid}" in err, err
+    assert f"--output-dir {out}: rgb is being written there by process {holder.pid}" in err, err
     assert f"kill {holder.pid}" in err and "choose another --output-dir" in err
-    assert every_path(out) == {RENDER_LOCK}, "nothing written beside the other render's work"
+    assert every_path(out) == {render_lock("rgb")}, "nothing written beside the other render's work"
+
+
+def test_a_render_of_other_outputs_shares_the_folder_of_a_live_render(run_config: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    holder = hold_render_lock(out, "rgb")
+    try:
+        main([*_quick(run_config, "arc"), "--n-frames", "1", "--no-video", "--outputs", "depth", "--output-dir",
+              str(out)])  # fmt: skip
+    finally:
+        holder.kill()
+        holder.wait()
+    assert every_path(out) == {render_lock("rgb"), "depth", "depth/frame_00000.png"}, "the other render's lock stays"
 
 
 def test_the_lock_of_a_render_that_is_gone_is_taken_over(run_config: Path, tmp_path: Path) -> None:
     gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
     out = tmp_path / "out"
     out.mkdir()
-    (out / RENDER_LOCK).write_text(gone.stdout)  # what a render killed with SIGKILL leaves
+    (out / render_lock("rgb")).write_text(gone.stdout)  # what a render killed with SIGKILL leaves
     main([*_quick(run_config, "arc"), "--n-frames", "1", "--no-video", "--output-dir", str(out)])
     assert every_path(out) == {"rgb", "rgb/frame_00000.png"}, "the lock is released with the render"
 

@@ -141,14 +141,21 @@ class Run:
     seed: int
     views: str  # a label for the training-view set
     budget: str | None = None
-    """A ``--time-budget`` that sizes the run in place of ``iters`` and the grid flags (the trainer picks both)."""
+    """A ``--time-budget`` ("3m") or iterations ("800it") that size the run in place of ``iters`` and the grid flags:
+    the trainer picks the rest, as for a user's run."""
+    name: str = ""
+    """The key's name where it is not the method's (a variant of the method)."""
 
     @property
     def key(self) -> str:
-        return f"{self.method}_{self.views}_{self.budget or self.iters}_s{self.seed}"
+        return f"{self.name or self.method}_{self.views}_{self.budget or self.iters}_s{self.seed}"
 
     def sizes(self) -> list[str]:
-        return ["--time-budget", self.budget] if self.budget else ["--max-num-iterations", str(self.iters), *GRID_FLAGS]
+        if self.budget is None:
+            return ["--max-num-iterations", str(self.iters), *GRID_FLAGS]
+        return (
+            ["--max-num-iterations", str(self.iters)] if self.budget.endswith("it") else ["--time-budget", self.budget]
+        )
 
 
 def train_and_eval(

@@ -15,11 +15,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
+import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
-import equal_time
 from harness import (
     EQUAL_ITERATIONS_RESULTS,
     EQUAL_TIME_RESULTS,
@@ -30,17 +32,22 @@ from harness import (
     Suite,
     applies,
     chosen_setting,
+    cpu_and_cores,
+    done_record,
     evaluate,
     load_results,
     load_suite,
     point_run,
+    read_metrics,
     record,
     rows_by,
     run_all,
     setting_flags,
     train_and_eval,
+    train_command,
 )
 
+from fourierf_plugin.method_configs.time_budget import parse_duration
 from fourierf_plugin.utils.errors import UserError
 
 SUITE = load_suite()
@@ -85,9 +92,106 @@ def quality_job(point: Point, args: argparse.Namespace) -> Job:
     return Job(f"{scene}/{run.key}", args.work / scene / run.key, lambda: execute(point, args))
 
 
-def equal_time_job(point: equal_time.Point, args: argparse.Namespace) -> Job:
-    run = lambda: equal_time.execute(point, SUITE, args.data, args.work, args.lpips, args.jobs)  # noqa: E731
-    return Job(point.key, args.work / point.scene / point.run(SUITE).key, run)
+# -- equal time and equal iterations: each method given the same wall time (``--time-budget``) or iterations ("800it")
+# on each scene, as a user would run it with no size flag; a budget too short for a method's fewest iterations is a
+# row that says so, not a failure.
+THREADS = 1
+"""One thread a run: a CPU run is then bit-reproducible, and two run side by side on two cores."""
+TOO_SHORT = re.compile(r"--time-budget \S+ is too short[^\n]*")
+ESTIMATE = re.compile(r"~([0-9.e+-]+) s per iteration")
+"""The trainer's own estimate in its too-short message: a method too slow for every budget still gets a speed."""
+
+
+def budget_iterations(budget: str) -> int | None:
+    """The iterations of a budget such as "800it", or None (a wall-time budget such as "3m")."""
+    found = re.fullmatch(r"([1-9][0-9]*)it", budget)
+    return int(found.group(1)) if found else None
+
+
+@dataclass(frozen=True)
+class TimedPoint:
+    scene: str
+    method: str  # a method, or an equal-iterations variant: a method with flags of its own
+    budget: str
+
+    @property
+    def key(self) -> str:
+        return f"{self.scene}/{self.method}/{self.budget}"
+
+    def variant(self, suite: Suite) -> dict:
+        return suite.equal_time["iterations"].get("variants", {}).get(self.method, {})
+
+    def run(self, suite: Suite) -> Run:
+        iterations, seed = budget_iterations(self.budget), suite.equal_time["seed"]
+        if iterations is None:
+            return Run(self.method, 0, seed, "equal-time", self.budget)
+        method = self.variant(suite).get("method", self.method)
+        return Run(method, iterations, seed, "equal-iterations", self.budget, name=self.method)
+
+    def train_args(self, suite: Suite, data: Path, work: Path) -> tuple[Run, Path, list[str], Path, list[str]]:
+        """``train_and_eval``'s run, data, parser flags, work folder and extra flags (a variant's own)."""
+        parser = suite.parser_args(self.scene, suite.equal_time["protocol"])
+        flags = list(self.variant(suite).get("flags", []))
+        return self.run(suite), data / suite.scenes[self.scene]["path"], parser, work / self.scene, flags
+
+
+def timed_plan(suite: Suite, scenes: Sequence[str], budgets: Sequence[str], only: Sequence[str] | None = None) -> list:
+    """The equal-time points, longest budget first (two jobs at once end on short runs)."""
+    longest_first = sorted(budgets, key=parse_duration, reverse=True)
+    return [TimedPoint(s, m, b) for b in longest_first for s in scenes for m in only or suite.equal_time["methods"]]
+
+
+def iteration_plan(
+    suite: Suite, scenes: Sequence[str], only: Sequence[str] | None = None, budget: str | None = None
+) -> list[TimedPoint]:
+    """The equal-iterations points in the suite's method order (slowest first), a variant only on its scenes."""
+    stage = suite.equal_time["iterations"]
+    points = [TimedPoint(s, m, budget or stage["budget"]) for m in only or stage["methods"] for s in scenes]
+    return [p for p in points if p.scene in p.variant(suite).get("scenes", scenes)]
+
+
+def point_command(point: TimedPoint, suite: Suite, data: Path, work: Path) -> list[str]:
+    """The training command ``execute_timed`` runs for a point."""
+    run, scene_data, parser, scene_work, flags = point.train_args(suite, data, work)
+    return train_command(run, scene_data, scene_work / "runs", parser, flags, threads=THREADS)
+
+
+def too_short(log: Path) -> str | None:
+    """The train CLI's "--time-budget ... is too short" line in a failed run's log, or None (another failure)."""
+    found = TOO_SHORT.search(log.read_text(errors="replace")) if log.is_file() else None
+    return found.group(0) if found else None
+
+
+def execute_timed(point: TimedPoint, suite: Suite, data: Path, work: Path, lpips: Path, jobs: int) -> dict:
+    """Train and evaluate one point; its row (planned and actual training seconds from the run's metrics)."""
+    started, (run, scene_data, parser, scene_work, flags) = time.perf_counter(), point.train_args(suite, data, work)
+    iterations = budget_iterations(point.budget)
+    size = {"budget_iterations": iterations} if iterations else {"budget_seconds": parse_duration(point.budget)}
+    row = {
+        "scene": point.scene, "method": point.method, "budget": point.budget, **size, "flags": flags,
+        "threads": THREADS, "jobs": jobs, "machine": cpu_and_cores(),
+    }  # fmt: skip
+    try:
+        trained = train_and_eval(run, scene_data, parser, scene_work, lpips, point.scene, flags, threads=THREADS)
+    except RuntimeError:
+        if (message := too_short(scene_work / f"{run.key}.train.log")) is None:
+            raise
+        estimate = ESTIMATE.search(message)
+        row |= {"estimated_seconds_per_iteration": float(estimate.group(1))} if estimate else {}
+        return row | {"too_short": message, "seconds": time.perf_counter() - started}
+    done = done_record(read_metrics(Path(trained["run_dir"]) / "metrics.jsonl")) or {}
+    iterations, seconds = int(done["step"]), float(done["train_seconds"])
+    return row | {
+        "planned_seconds": done.get("planned_train_seconds"), "trained_seconds": seconds, "iterations": iterations,
+        "planned_iterations": done.get("planned_iterations", iterations), "seconds_per_iteration": seconds / iterations,
+        **{k: trained[k] for k in ("psnr", "ssim", "lpips", "train_threads", "train_view_ids", "run_dir")},
+        "seconds": time.perf_counter() - started,
+    }  # fmt: skip
+
+
+def timed_job(point: TimedPoint, args: argparse.Namespace) -> Job:
+    execute = lambda: execute_timed(point, SUITE, args.data, args.work, args.lpips, args.jobs)  # noqa: E731
+    return Job(point.key, args.work / point.scene / point.run(SUITE).key, execute)
 
 
 ROW_FIELDS = ("key", "scene", "protocol", "method", "setting", "seed", "val_psnr", "psnr")
@@ -233,7 +337,7 @@ def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argpa
     args.results = args.results or results.get(stage, QUALITY_RESULTS)
     if args.budget is not None and not (timed or counted):
         sys.exit(f"error: --budget sets the equal-time stage's budgets; drop it for the {stage} stage")
-    if counted and args.budget and (len(args.budget) != 1 or not equal_time.budget_iterations(args.budget[0])):
+    if counted and args.budget and (len(args.budget) != 1 or not budget_iterations(args.budget[0])):
         sys.exit(f"error: --budget {' '.join(args.budget)}: the equal-iterations stage takes one count, e.g. 200it")
     default = [suite.equal_time["iterations"]["budget"]] if counted else list(suite.equal_time["budgets"])
     args.budget = args.budget or default
@@ -274,12 +378,12 @@ def main() -> None:
     if args.stage in ("equal-time", "equal-iterations"):
         try:
             if args.stage == "equal-time":
-                points = equal_time.plan(SUITE, args.scene, args.budget, args.methods)
+                points = timed_plan(SUITE, args.scene, args.budget, args.methods)
             else:
-                points = equal_time.iteration_plan(SUITE, args.scene, args.methods, args.budget[0])
+                points = iteration_plan(SUITE, args.scene, args.methods, args.budget[0])
         except UserError as err:  # a --budget that is no duration
             sys.exit(f"error: --budget: {err}")
-        return run_all([equal_time_job(p, args) for p in points], args.results, args.jobs, args.again)
+        return run_all([timed_job(p, args) for p in points], args.results, args.jobs, args.again)
     plan = {"sweep": sweep_plan, "seeds": seeds_plan, "curve": curve_plan}[args.stage](args)
     plan.sort(key=lambda p: (-p[3].iters, p[0] != "fern"))  # longest first: the pool ends on short runs
     run_all([quality_job(p, args) for p in plan], args.results, args.jobs, args.again)

@@ -7,12 +7,14 @@ import subprocess
 import sys
 from pathlib import Path
 
-import equal_time
 import harness
 import pytest
 import report as rep
 
 from tests.benchmarks.test_equal_time import fake_runs  # noqa: F401 (a fixture)
+from tests.helpers import load_benchmark
+
+runner = load_benchmark("run")
 
 SUITE = harness.load_suite()
 SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "run.py"
@@ -40,36 +42,36 @@ ROWS = [
 
 
 def test_an_iteration_budget_is_max_iterations_with_no_size_flag(tmp_path: Path) -> None:
-    cmd = equal_time.point_command(equal_time.Point("fern", "tensorf-vm", BUDGET), SUITE, tmp_path, tmp_path / "w")
+    cmd = runner.point_command(runner.TimedPoint("fern", "tensorf-vm", BUDGET), SUITE, tmp_path, tmp_path / "w")
     assert cmd[1] == "tensorf-vm" and cmd[cmd.index("--max-num-iterations") + 1] == BUDGET.removesuffix("it")
     assert not any(flag in c for c in cmd for flag in SIZE_FLAGS) and cmd[cmd.index("--threads") + 1] == "1"
     assert "--pipeline.model.alpha-weight" not in cmd
-    assert equal_time.budget_iterations("800it") == 800
-    assert equal_time.budget_iterations("3m") is equal_time.budget_iterations("0it") is None
+    assert runner.budget_iterations("800it") == 800
+    assert runner.budget_iterations("3m") is runner.budget_iterations("0it") is None
 
 
 def test_a_variant_trains_its_method_with_its_flags_under_its_own_key(tmp_path: Path) -> None:
-    variant, plain = (equal_time.Point("lego", m, BUDGET) for m in ("zerorf-vm-no-alpha", "zerorf-vm"))
-    cmd = equal_time.point_command(variant, SUITE, tmp_path, tmp_path / "w")
+    variant, plain = (runner.TimedPoint("lego", m, BUDGET) for m in ("zerorf-vm-no-alpha", "zerorf-vm"))
+    cmd = runner.point_command(variant, SUITE, tmp_path, tmp_path / "w")
     assert cmd[1] == "zerorf-vm" and cmd[cmd.index("--pipeline.model.alpha-weight") + 1] == "0"
     assert cmd.index("--pipeline.model.alpha-weight") < cmd.index("blender-data")  # a trainer flag, not a parser's
     assert not any(flag in c for c in cmd for flag in SIZE_FLAGS)
     assert variant.run(SUITE).key != plain.run(SUITE).key and variant.run(SUITE).key.startswith("zerorf-vm-no-alpha_")
-    assert "--pipeline.model.alpha-weight" not in equal_time.point_command(plain, SUITE, tmp_path, tmp_path / "w")
+    assert "--pipeline.model.alpha-weight" not in runner.point_command(plain, SUITE, tmp_path, tmp_path / "w")
 
 
 def test_the_plan_runs_the_slowest_methods_first_and_a_variant_on_its_scenes_only() -> None:
-    points = equal_time.iteration_plan(SUITE, ["lego", "fern"])
+    points = runner.iteration_plan(SUITE, ["lego", "fern"])
     keys = [p.key for p in points]
     assert keys[:3] == ["lego/zerorf-vm/800it", "fern/zerorf-vm/800it", "lego/zerorf-vm-no-alpha/800it"]
     assert "fern/zerorf-vm-no-alpha/800it" not in keys and not any("freenerf" in k for k in keys)
     assert len(keys) == 2 * len(SUITE.equal_time["iterations"]["methods"]) - 1
-    assert equal_time.iteration_plan(SUITE, ["fern"], ["zerorf-vm-no-alpha"]) == []
+    assert runner.iteration_plan(SUITE, ["fern"], ["zerorf-vm-no-alpha"]) == []
 
 
 def test_a_point_records_its_iterations_flags_and_metrics(fake_runs: dict, tmp_path: Path) -> None:  # noqa: F811
-    point = equal_time.Point("lego", "zerorf-vm-no-alpha", BUDGET)
-    row = equal_time.execute(point, SUITE, tmp_path, tmp_path, tmp_path, 2)
+    point = runner.TimedPoint("lego", "zerorf-vm-no-alpha", BUDGET)
+    row = runner.execute_timed(point, SUITE, tmp_path, tmp_path, tmp_path, 2)
     assert row["budget_iterations"] == 800 and "budget_seconds" not in row
     assert row["flags"] == ["--pipeline.model.alpha-weight", "0"] and row["method"] == "zerorf-vm-no-alpha"
     assert row["iterations"] == 500 and row["seconds_per_iteration"] == pytest.approx(0.11)
@@ -127,5 +129,5 @@ def test_a_budget_that_is_not_one_count_of_iterations_is_one_clear_error(tmp_pat
 
 
 def test_a_shorter_budget_plans_every_point_at_it() -> None:
-    points = equal_time.iteration_plan(SUITE, ["lego"], ["zerorf-vm"], "150it")
+    points = runner.iteration_plan(SUITE, ["lego"], ["zerorf-vm"], "150it")
     assert [p.key for p in points] == ["lego/zerorf-vm/150it"] and points[0].run(SUITE).iters == 150

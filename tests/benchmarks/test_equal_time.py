@@ -11,11 +11,13 @@ import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-import equal_time
 import harness
 import pytest
 import report as rep
 
+from tests.helpers import load_benchmark
+
+runner = load_benchmark("run")
 SUITE = harness.load_suite()
 SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "run.py"
 
@@ -51,7 +53,7 @@ ROWS = [
 
 
 def test_a_points_command_is_a_users_run_at_its_budget_on_one_thread(tmp_path: Path) -> None:
-    cmd = equal_time.point_command(equal_time.Point("lego", "zerorf-vm", "3m"), SUITE, tmp_path, tmp_path / "w")
+    cmd = runner.point_command(runner.TimedPoint("lego", "zerorf-vm", "3m"), SUITE, tmp_path, tmp_path / "w")
     assert cmd[0].endswith("fourierf-train") and cmd[1] == "zerorf-vm"
     assert cmd[cmd.index("--time-budget") + 1] == "3m" and cmd[cmd.index("--threads") + 1] == "1"
     assert "--max-num-iterations" not in cmd and not any("n-voxels" in c or "rays-per-batch" in c for c in cmd)
@@ -59,16 +61,16 @@ def test_a_points_command_is_a_users_run_at_its_budget_on_one_thread(tmp_path: P
     parser = cmd[cmd.index("blender-data") :]
     assert parser[1:3] == ["--downscale", "4"]  # the cpu protocol's 100×100
     assert parser[parser.index("--view-ids") + 1 :] == ["27", "76", "97", "99"]
-    fern = equal_time.point_command(equal_time.Point("fern", "freenerf", "1m"), SUITE, tmp_path, tmp_path / "w")
+    fern = runner.point_command(runner.TimedPoint("fern", "freenerf", "1m"), SUITE, tmp_path, tmp_path / "w")
     assert fern[fern.index("llff-data") :] == ["llff-data", "--num-views", "3"]
 
 
 def test_the_plan_runs_longest_budgets_first() -> None:
-    points = equal_time.plan(SUITE, ["lego", "fern"], ["1m", "30m", "3m"], ["fourierf-vm", "zerorf-vm"])
+    points = runner.timed_plan(SUITE, ["lego", "fern"], ["1m", "30m", "3m"], ["fourierf-vm", "zerorf-vm"])
     assert [p.budget for p in points] == ["30m"] * 4 + ["3m"] * 4 + ["1m"] * 4
     assert {p.method for p in points} == {"fourierf-vm", "zerorf-vm"}
     assert len({p.key for p in points}) == len(points)
-    every = equal_time.plan(SUITE, ["fern"], ["1m"])
+    every = runner.timed_plan(SUITE, ["fern"], ["1m"])
     assert [p.method for p in every] == list(SUITE.equal_time["methods"])
 
 
@@ -102,7 +104,7 @@ def fake_runs(monkeypatch: pytest.MonkeyPatch) -> dict:
 
 
 def test_a_point_records_planned_and_actual_time_iterations_and_metrics(fake_runs: dict, tmp_path: Path) -> None:
-    row = equal_time.execute(equal_time.Point("lego", "fourierf-vm", "1m"), SUITE, tmp_path, tmp_path, tmp_path, 2)
+    row = runner.execute_timed(runner.TimedPoint("lego", "fourierf-vm", "1m"), SUITE, tmp_path, tmp_path, tmp_path, 2)
     assert (row["budget_seconds"], row["planned_seconds"], row["trained_seconds"]) == (60.0, 57.0, 55.0)
     assert row["iterations"] == 500 and row["seconds_per_iteration"] == pytest.approx(0.11)
     assert (row["psnr"], row["ssim"], row["lpips"], row["threads"], row["jobs"]) == (21.0, 0.8, 0.2, 1, 2)
@@ -111,10 +113,10 @@ def test_a_point_records_planned_and_actual_time_iterations_and_metrics(fake_run
 
 def test_a_budget_too_short_is_a_row_that_says_so(fake_runs: dict, tmp_path: Path) -> None:
     fake_runs["too_short"] = True
-    row = equal_time.execute(equal_time.Point("lego", "freenerf", "1m"), SUITE, tmp_path, tmp_path, tmp_path, 1)
+    row = runner.execute_timed(runner.TimedPoint("lego", "freenerf", "1m"), SUITE, tmp_path, tmp_path, tmp_path, 1)
     assert row["too_short"].startswith("--time-budget 1m is too short") and "psnr" not in row
     assert row["estimated_seconds_per_iteration"] == 1.2
-    assert equal_time.too_short(tmp_path / "missing.log") is None
+    assert runner.too_short(tmp_path / "missing.log") is None
 
 
 def test_time_to_psnr_interpolates_on_log_time() -> None:

@@ -54,16 +54,12 @@ def val_cell(rows: list[dict], seeds: Sequence[int]) -> str:
     return first
 
 
-def rule_at_800(suite: Suite) -> dict[tuple[str, str], str]:
-    """(method, the rule's 3000-iteration setting) -> its 800-iteration setting, where the two are named apart."""
-    pairs = {(m, r["at_3000"]): r["at_800"] for m, r in suite.rule_along_the_budget.items()}
-    return pairs | {(F, "lr0.08-tvconst-ramp0.2667-tv4"): "lr0.08-tvconst-tv4"}  # the band open by step 800 of 3000
-
-
 def curve_table(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
     """Val and test PSNR along each curve run's training, next to the 800-iteration run of the same sizes and setting,
     or the budget rule's setting at 800 where the rule names them apart (does quality hold as the budget grows?)."""
-    lines, pairs = [], rule_at_800(suite)
+    pairs = {(m, r["at_3000"]): r["at_800"] for m, r in suite.rule_along_the_budget.items()}
+    pairs[(F, "lr0.08-tvconst-ramp0.2667-tv4")] = "lr0.08-tvconst-tv4"  # the band open by step 800 of 3000
+    lines = []
     for r in sorted(results.values(), key=lambda r: r["key"]):
         if "curve" not in r:
             continue
@@ -91,8 +87,7 @@ def first_seed_row(results: dict[str, dict], protocol: str, method: str, setting
 
 
 def mid_along_the_budget(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
-    """Does quality hold as the budget grows? Fern at mid sizes and `lr0.08`, 800 against 3000 iterations, for each
-    method: the first seed's runs, the only seed mid-800 ran."""
+    """Fern at mid sizes and `lr0.08`, 800 against 3000 iterations, per method, first seed (mid-800's only one)."""
     lines = []
     for m in suite.methods:
         short, long = (first_seed_row(results, p, m, "lr0.08", suite) for p in ("mid-800", "mid-3000"))
@@ -237,15 +232,6 @@ def recording_machines(rows: Iterable[dict]) -> str:
     return f"several machines (2-core CPUs, torch 2.13.0+cpu; an H100 where the device is cuda){those}"
 
 
-def protocols_table(suite: Suite) -> list[str]:
-    scenes = {"lego": lambda p: f"{400 // p.lego_downscale}×{400 // p.lego_downscale}", "fern": lambda p: "504×378"}
-    lines = []
-    for p in suite.protocols.values():
-        cells = [scenes[s](p) if s in p.scenes else "—" for s in ("lego", "fern")]
-        lines.append(f"| {p.name} | {p.iters} | {p.rays} | {p.grid[0]}³ → {p.grid[1]}³ | {' | '.join(cells)} |")
-    return [*table(["protocol", "iterations", "rays", "grid", "lego image", "fern image"], lines), ""]
-
-
 def quality_section(results: dict[str, dict], repeats: Sequence[dict], suite: Suite = SUITE) -> list[str]:
     seeds = suite.seeds
     views = "; ".join(f"{scene}: {s['views']}" for scene, s in suite.scenes.items())
@@ -262,7 +248,14 @@ def quality_section(results: dict[str, dict], repeats: Sequence[dict], suite: Su
         "measurement (the speed benchmarks are the interleaved ones).",
         machine=recording_machines(results.values()),
     )
-    body += protocols_table(suite)
+    images = {"lego": lambda p: f"{400 // p.lego_downscale}×{400 // p.lego_downscale}", "fern": lambda p: "504×378"}
+    protocols = [
+        f"| {p.name} | {p.iters} | {p.rays} | {p.grid[0]}³ → {p.grid[1]}³ | "
+        + " | ".join(images[s](p) if s in p.scenes else "—" for s in ("lego", "fern"))
+        + " |"
+        for p in suite.protocols.values()
+    ]
+    body += [*table(["protocol", "iterations", "rays", "grid", "lego image", "fern image"], protocols), ""]
     summary: list[str] = []
     sweeps: list[str] = []
     for scene in suite.settings:
@@ -318,10 +311,6 @@ def quality_section(results: dict[str, dict], repeats: Sequence[dict], suite: Su
 
 # -- equal time and equal iterations: each point a user's run (run.py equal-time / equal-iterations) ---------------
 FIGURE = "docs/equal_time.svg"
-TIME_COMMAND = "python benchmarks/run.py equal-time --jobs 2, then python benchmarks/report.py"
-ITERATIONS_COMMAND = (
-    "python benchmarks/run.py equal-iterations --scene lego fern --jobs 2, then python benchmarks/report.py"
-)
 ITERATIONS_TITLE = "Equal iterations: the paper's systems at the default CPU run"
 PAPER, BASELINE = "fourierf-vm-paper", "tensorf-vm-published"
 ALPHA, NO_ALPHA = "zerorf-vm", "zerorf-vm-no-alpha"
@@ -335,7 +324,6 @@ def stage_head(rows: Sequence[dict], title: str, command: str, settings: str) ->
 
 
 def lego_side(suite: Suite) -> int:
-    """The side of lego's images in the equal-time stage (Blender's are 400×400)."""
     return 400 // suite.protocols[suite.equal_time["protocol"]].lego_downscale
 
 
@@ -343,15 +331,6 @@ def timed(rows: Sequence[dict], scene: str, method: str) -> list[dict]:
     """The rows of a method on a scene that trained (not too short), by training time."""
     found = [r for r in rows if (r["scene"], r["method"]) == (scene, method) and "too_short" not in r]
     return sorted(found, key=lambda r: r["trained_seconds"])
-
-
-def metrics_cell(rows: Sequence[dict], scene: str, method: str, budget: str) -> str:
-    row = next((r for r in rows if (r["scene"], r["method"], r["budget"]) == (scene, method, budget)), None)
-    if row is None:
-        return "—"
-    if "too_short" in row:
-        return "too short"
-    return f"{row['psnr']:.2f} / {row['ssim']:.3f} / {row['lpips']:.3f}"
 
 
 def time_to_psnr(points: Sequence[tuple[float, float]], target: float) -> tuple[float, bool] | None:
@@ -377,35 +356,21 @@ def duration(seconds: float) -> str:
 
 def time_cell(points: Sequence[tuple[float, float]], target: float) -> str:
     found = time_to_psnr(points, target)
-    if found is None:
-        return "not reached"
-    return ("≤ " if found[1] else "") + duration(found[0])
-
-
-def seconds_per_iteration(rows: Sequence[dict], scene: str, method: str) -> tuple[float, bool] | None:
-    """A method's mean seconds per iteration on a scene over its trained points, else (True) over the trainer's
-    estimates in its too-short points; None without either."""
-    own = [r["seconds_per_iteration"] for r in timed(rows, scene, method)]
-    estimated = [
-        r["estimated_seconds_per_iteration"]
-        for r in rows
-        if (r["scene"], r["method"]) == (scene, method) and "estimated_seconds_per_iteration" in r
-    ]
-    values = own or estimated
-    return (sum(values) / len(values), not own) if values else None
+    return "not reached" if found is None else ("≤ " if found[1] else "") + duration(found[0])
 
 
 def speed_cell(rows: Sequence[dict], scene: str, method: str, baseline: str) -> str:
-    """A method's seconds per iteration over the baseline's on a scene; "est." where either is an estimate."""
-    own, base = (seconds_per_iteration(rows, scene, m) for m in (method, baseline))
-    if own is None or base is None:
-        return "—"
-    return f"{own[0] / base[0]:.2f}" + (" (est.)" if own[1] or base[1] else "")
-
-
-def budgets_of(rows: Sequence[dict], scene: str) -> list[str]:
-    found = {r["budget"]: r["budget_seconds"] for r in rows if r["scene"] == scene}
-    return sorted(found, key=found.__getitem__)
+    """A method's mean seconds per iteration over the baseline's on a scene, over their trained points, else over the
+    trainer's estimates in their too-short points ("est.")."""
+    means = []
+    for m in (method, baseline):
+        own = [r["seconds_per_iteration"] for r in timed(rows, scene, m)]
+        here = [r for r in rows if (r["scene"], r["method"]) == (scene, m)]
+        values = own or [r["estimated_seconds_per_iteration"] for r in here if "estimated_seconds_per_iteration" in r]
+        if not values:
+            return "—"
+        means.append((sum(values) / len(values), not own))
+    return f"{means[0][0] / means[1][0]:.2f}" + (" (est.)" if means[0][1] or means[1][1] else "")
 
 
 def methods_of(rows: Sequence[dict], suite: Suite) -> list[str]:
@@ -415,15 +380,22 @@ def methods_of(rows: Sequence[dict], suite: Suite) -> list[str]:
 
 
 def scene_tables(rows: Sequence[dict], scene: str, suite: Suite) -> list[str]:
-    budgets, methods = budgets_of(rows, scene), methods_of([r for r in rows if r["scene"] == scene], suite)
+    here = {(r["method"], r["budget"]): r for r in rows if r["scene"] == scene}
+    seconds = {budget: r["budget_seconds"] for (_, budget), r in here.items()}
+    budgets, methods = sorted(seconds, key=seconds.__getitem__), methods_of(list(here.values()), suite)
     targets = suite.equal_time["psnr_targets"].get(scene, [])
-    metrics = [md_row([m, *(metrics_cell(rows, scene, m, b) for b in budgets)]) for m in methods]
+
+    def cell(row: dict | None) -> str:
+        if row is None:
+            return "—"
+        return "too short" if "too_short" in row else f"{row['psnr']:.2f} / {row['ssim']:.3f} / {row['lpips']:.3f}"
+
     lines = [
         f"### {scene}",
         "",
         "Test PSNR / SSIM / LPIPS at each budget (too short: the budget does not fit the method's fewest iterations):",
         "",
-        *table(["method", *budgets], metrics),
+        *table(["method", *budgets], [md_row([m, *(cell(here.get((m, b))) for b in budgets)]) for m in methods]),
     ]
     if targets:
         points = {m: [(r["trained_seconds"], r["psnr"]) for r in timed(rows, scene, m)] for m in methods}
@@ -453,18 +425,12 @@ def speed_table(rows: Sequence[dict], suite: Suite) -> list[str]:
     ]
 
 
-def stage_time(rows: Sequence[dict]) -> str:
-    """How long the stage took: its points' seconds (training, evaluation, start-up) summed, over the jobs at once."""
-    total, jobs = sum(r["seconds"] for r in rows), max(r["jobs"] for r in rows)
-    return f"The {len(rows)} points took {duration(total)} in all, about {duration(total / jobs)} at {jobs} at a time."
-
-
 def equal_time_section(rows: Sequence[dict], suite: Suite) -> list[str]:
     side = lego_side(suite)
     body = stage_head(
         rows,
         "Equal-time comparison",
-        TIME_COMMAND,
+        "python benchmarks/run.py equal-time --jobs 2, then python benchmarks/report.py",
         "Each point is a user's run: `fourierf-train METHOD --time-budget B --threads 1`, sized for the scene and "
         "the machine, the short-run rules applying as they would, then `fourierf-eval` on the test views. Scenes "
         f"and budgets: `[equal_time]` in `benchmarks/suite.toml`; lego at {side}×{side}. Times are training seconds "
@@ -490,9 +456,15 @@ def equal_time_section(rows: Sequence[dict], suite: Suite) -> list[str]:
             f"{max(cut):.0%} of their planned iterations (those cost more than the opening steps timed).",
             "",
         ]
-    body += speed_table(rows, suite)
-    body += [stage_time(rows), "", f"![test PSNR against training time, log axis]({FIGURE})", ""]
-    return body
+    total, jobs = sum(r["seconds"] for r in rows), max(r["jobs"] for r in rows)
+    return [
+        *body,
+        *speed_table(rows, suite),
+        f"The {len(rows)} points took {duration(total)} in all, about {duration(total / jobs)} at {jobs} at a time.",
+        "",
+        f"![test PSNR against training time, log axis]({FIGURE})",
+        "",
+    ]
 
 
 def figure(rows: Sequence[dict], suite: Suite) -> str:
@@ -553,29 +525,23 @@ def counted(rows: Sequence[dict], scene: str, method: str) -> list[dict]:
     return sorted(found, key=lambda r: -r["iterations"])
 
 
-def gap(rows: Sequence[dict], scene: str, ahead: str, behind: str) -> tuple[float, int] | None:
-    """Test PSNR of ``ahead`` minus ``behind`` on a scene in dB at the most iterations both ran (and those
-    iterations), or None where they share no budget."""
+def gap(rows: Sequence[dict], scene: str, ahead: str, behind: str) -> str:
+    """Test PSNR of ``ahead`` minus ``behind`` on a scene at the most iterations both ran."""
     for first in counted(rows, scene, ahead):
         second = next((r for r in counted(rows, scene, behind) if r["budget"] == first["budget"]), None)
         if second is not None:
-            return first["psnr"] - second["psnr"], first["iterations"]
-    return None
-
-
-def db(found: tuple[float, int] | None) -> str:
-    return "not run at equal iterations" if found is None else f"{found[0]:+.2f} dB at {found[1]} iterations"
+            return f"{first['psnr'] - second['psnr']:+.2f} dB at {first['iterations']} iterations"
+    return "not run at equal iterations"
 
 
 def iterations_table(rows: Sequence[dict], scene: str, methods: Sequence[str]) -> list[str]:
-    lines = [f"### {scene}", "", *table(["method", "test PSNR", "SSIM", "LPIPS", "iterations", "training s",
-                                         "s/iteration"], [])]  # fmt: skip
+    head = ["method", "test PSNR", "SSIM", "LPIPS", "iterations", "training s", "s/iteration"]
+    lines = [f"### {scene}", "", *table(head, [])]
     for method in methods:
-        found = counted(rows, scene, method)
         lines += [
             f"| {method} | {row['psnr']:.2f} | {row['ssim']:.3f} | {row['lpips']:.3f} | {row['iterations']} | "
             f"{row['trained_seconds']:.0f} | {row['seconds_per_iteration']:.2f} |"
-            for row in found
+            for row in counted(rows, scene, method)
         ] or [f"| {method} | not run | | | | | |"]
     return [*lines, ""]
 
@@ -584,12 +550,12 @@ def derived_lines(rows: Sequence[dict], suite: Suite) -> list[str]:
     """FourieRF (paper) over TensoRF (published) on each scene beside the paper's gap; ZeroRF's alpha term on lego."""
     paper_gap = suite.equal_time["iterations"]["paper_gap"]
     gaps = [
-        f"{scene} {db(gap(rows, scene, PAPER, BASELINE))} (paper at full scale: {paper_gap[scene]:+.1f} dB)"
+        f"{scene} {gap(rows, scene, PAPER, BASELINE)} (paper at full scale: {paper_gap[scene]:+.1f} dB)"
         for scene in suite.equal_time["scenes"]
     ]
     return [
         f"- {PAPER} minus {BASELINE}, test PSNR: " + "; ".join(gaps) + ".",
-        f"- {ALPHA} with minus without its alpha term ({NO_ALPHA}) on lego: {db(gap(rows, 'lego', ALPHA, NO_ALPHA))}.",
+        f"- {ALPHA} with minus without its alpha term ({NO_ALPHA}) on lego: {gap(rows, 'lego', ALPHA, NO_ALPHA)}.",
         "",
     ]
 
@@ -599,7 +565,7 @@ def equal_iterations_section(rows: Sequence[dict], suite: Suite) -> list[str]:
     body = stage_head(
         rows,
         ITERATIONS_TITLE,
-        ITERATIONS_COMMAND,
+        "python benchmarks/run.py equal-iterations --scene lego fern --jobs 2, then python benchmarks/report.py",
         f"Each point is a user's run at {stage['budget'].removesuffix('it')} iterations: `fourierf-train METHOD "
         "--max-num-iterations N --threads 1` with no size flag (sized as the default CPU run, the short-run rules "
         f"applying as they would), then `fourierf-eval` on the test views; lego at {side}×{side}. {NO_ALPHA} is "
@@ -627,13 +593,14 @@ def main() -> None:
     ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")
     ap.add_argument("--figure", type=Path, default=REPO / FIGURE, help="the equal-time figure (SVG)")
     args = ap.parse_args()
-    body = quality_section(load_results(args.results), read_jsonl(args.results.with_name(REPEATS)))
-    print(update_benchmarks_md(args.markdown, *QUALITY, body))
-    timed_rows = list(load_results(args.equal_time).values())
-    print(update_benchmarks_md(args.markdown, *TIMED, equal_time_section(timed_rows, SUITE)))
+    timed_rows, counted_rows = (list(load_results(p).values()) for p in (args.equal_time, args.equal_iterations))
+    for marks, body in (
+        (QUALITY, quality_section(load_results(args.results), read_jsonl(args.results.with_name(REPEATS)))),
+        (TIMED, equal_time_section(timed_rows, SUITE)),
+        (COUNTED, equal_iterations_section(counted_rows, SUITE)),
+    ):
+        print(update_benchmarks_md(args.markdown, *marks, body))
     args.figure.write_text(figure(timed_rows, SUITE))
-    counted_rows = list(load_results(args.equal_iterations).values())
-    print(update_benchmarks_md(args.markdown, *COUNTED, equal_iterations_section(counted_rows, SUITE)))
 
 
 if __name__ == "__main__":

@@ -28,15 +28,14 @@ from harness import (
     arguments,
     elapsed_by_step,
     eval_report,
-    markers,
     read_jsonl,
     read_metrics,
     run_checked,
     seconds_per_iteration,
     section_head,
     train_cmd,
-    update_benchmarks_md,
     write_jsonl,
+    write_section,
 )
 
 SOURCES = ("fourierf_plugin", "method_configs", "data/parsers")
@@ -49,7 +48,7 @@ class Scene:
     data: str  # the scene folder under <shared>/data
     flags: tuple[str, ...]  # method flags beyond P-CPU's sizes
     parser: tuple[str, ...]
-    title: str  # the BENCHMARKS.md section's title
+    title: str  # its BENCHMARKS.md section's title and marker
     marker: str
 
     @property
@@ -200,8 +199,8 @@ def summary(rows: list[dict], timings: dict[str, list[float]], meta: dict) -> li
     return lines
 
 
-def write_report(work: Path, markdown: Path) -> list[str]:
-    """The BENCHMARKS.md section of the A/B recorded in ``work`` (results.jsonl, iterations.json, meta.json)."""
+def write_report(work: Path, markdown: Path) -> None:
+    """Write the BENCHMARKS.md section of the A/B recorded in ``work`` (results.jsonl, iterations.json, meta.json)."""
     missing = [name for name in ("results.jsonl", "iterations.json", "meta.json") if not (work / name).is_file()]
     if missing:
         sys.exit(f"error: no A/B recorded in {work} (missing {', '.join(missing)}); run the A/B first")
@@ -210,9 +209,7 @@ def write_report(work: Path, markdown: Path) -> list[str]:
     if meta.get("old_flags") or meta.get("new_flags"):
         scene = scene.for_option()
     lines = summary(read_jsonl(work / "results.jsonl"), timings, meta)
-    body = [*section_head(scene.title, meta["command"]), *lines, ""]
-    update_benchmarks_md(markdown, *markers(scene.marker, "ab_speed.py"), body)
-    return lines
+    write_section(markdown, scene.marker, "ab_speed.py", [*section_head(scene.title, meta["command"]), *lines, ""])
 
 
 def main() -> None:
@@ -235,8 +232,7 @@ def main() -> None:
         ap.error(f"--old-flags / --new-flags: {err}; quote each side's flags as one shell string")
     args.work = args.work or REPO / "outputs" / f"bench_{scene.marker}"  # bench_ab_speed, bench_ab_speed_fern
     if args.report:
-        print("\n".join(write_report(args.work, args.markdown)))
-        return
+        return write_report(args.work, args.markdown)
     args.work.mkdir(parents=True, exist_ok=True)
     labels = {side: revision_label(rev) + (f" + {shlex.join(flags[side])}" if flags[side] else "")
               for side, rev in (("old", args.old), ("new", args.new))}  # fmt: skip
@@ -264,7 +260,7 @@ def main() -> None:
         "command": "python benchmarks/ab_speed.py " + shlex.join(sys.argv[1:]),
     }  # fmt: skip
     (args.work / "meta.json").write_text(json.dumps(meta))
-    print("\n".join(write_report(args.work, args.markdown)))
+    write_report(args.work, args.markdown)
 
 
 if __name__ == "__main__":

@@ -96,7 +96,7 @@ def run_dir_in(out: Path, method: str, stamp: str) -> Path:
 
 
 def read_jsonl(path: Path) -> list[dict]:
-    """The rows of a JSONL file (none if it is missing; blank lines skipped)."""
+    """The rows of a JSONL file (none if it is missing)."""
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()] if path.exists() else []
 
 
@@ -120,17 +120,15 @@ def log_records(records: list[dict]) -> list[dict]:
 
 
 def done_record(records: list[dict]) -> dict | None:
-    """The trainer's closing record: ``step``, ``train_seconds`` and, for a --time-budget run, the planned seconds."""
+    """The trainer's closing record (``step``, ``train_seconds``, a --time-budget run's planned seconds)."""
     return next((r for r in reversed(records) if r.get("event") == "done"), None)
 
 
 def elapsed_by_step(records: list[dict]) -> dict[int, float]:
-    """Training seconds since the start of the run at every logged step."""
     return {int(r["step"]): float(r["elapsed_s"]) for r in log_records(records) if "elapsed_s" in r}
 
 
 def seconds_per_iteration(elapsed: dict[int, float], first: int, last: int) -> float:
-    """Training seconds per iteration from logged step ``first`` to ``last``."""
     return (elapsed[last] - elapsed[first]) / (last - first)
 
 
@@ -140,11 +138,8 @@ class Run:
     iters: int
     seed: int
     views: str  # a label for the training-view set
-    budget: str | None = None
-    """A ``--time-budget`` ("3m") or iterations ("800it") that size the run in place of ``iters`` and the grid flags:
-    the trainer picks the rest, as for a user's run."""
-    name: str = ""
-    """The key's name where it is not the method's (a variant of the method)."""
+    budget: str | None = None  # "3m" or "800it": sizes the run as a user's, in place of the grid flags
+    name: str = ""  # the key's name where it is not the method's (a variant of the method)
 
     @property
     def key(self) -> str:
@@ -168,8 +163,7 @@ def train_and_eval(
     extra: Sequence[str] = (),
     threads: int | None = None,
 ) -> dict:
-    """Train one run, evaluate it on the test split, and return its result row. ``threads`` caps torch's CPU threads
-    in both steps, so that jobs side by side do not oversubscribe the cores."""
+    """Train one run, evaluate it on the test split: its result row. ``threads`` caps torch's CPU threads in both."""
     out_dir = work / "runs"
     # A run interrupted earlier left its directory without a result; a new run would otherwise go to "<key>-1".
     for earlier in [*out_dir.glob(f"*/{run.method}/{run.key}"), *out_dir.glob(f"*/{run.method}/{run.key}-1")]:
@@ -197,8 +191,7 @@ def train_command(
 
 
 def threads_used(train_log: Path) -> int | None:
-    """The CPU thread count the trainer reported in its log (None: not found). One thread is reproducible, more are
-    not (parallel kernels sum floats in a varying order), so a rerun must know it."""
+    """The CPU thread count the trainer reported in its log (None: not found): only one thread is reproducible."""
     try:
         found = CPU_THREADS_NOTE.search(train_log.read_text(errors="replace"))
     except OSError:
@@ -207,14 +200,12 @@ def threads_used(train_log: Path) -> int | None:
 
 
 def revived_batches(metrics: Path) -> int | None:
-    """Batches on which the run revived a dead density field, at its last logged step (None: its field cannot
-    revive). Where it is 0 the run is TensoRF's ReLU to the bit."""
+    """Batches on which the run revived a dead density field, at its last logged step (None: it cannot revive)."""
     counts = [r["revived_batches"] for r in log_records(read_metrics(metrics)) if "revived_batches" in r]
     return int(counts[-1]) if counts else None
 
 
 def thread_flags(threads: int | None) -> list[str]:
-    """``--threads N`` for the train and eval scripts, or nothing (torch's default: every core it sees)."""
     return [] if threads is None else ["--threads", str(threads)]
 
 
@@ -227,8 +218,8 @@ def evaluate(
     checkpoint: Path | None = None,
     threads: int | None = None,
 ) -> dict:
-    """Evaluate a trained run on one split, at its latest checkpoint or ``checkpoint``: metrics and timings for its
-    result row (other splits' keys prefixed with the split)."""
+    """Metrics and timings of a run on one split, at its latest checkpoint or ``checkpoint`` (keys of splits other
+    than test prefixed with the split)."""
     flags = ["--lpips-weights", str(lpips), "--split", split, *thread_flags(threads)]
     flags += ["--checkpoint", str(checkpoint)] if checkpoint is not None else []
     report, eval_s = eval_report(run_dir, work, key if split == "test" else f"{key}.{split}", *flags)
@@ -241,19 +232,10 @@ def evaluate(
     }  # fmt: skip
 
 
-def save_results(path: Path, results: dict[str, dict]) -> None:
-    """Rewrite the results file atomically (after rows were updated in place)."""
-    tmp = path.with_suffix(".tmp")
-    write_jsonl(tmp, results.values())
-    tmp.replace(path)
-
-
 @dataclass(frozen=True)
 class Job:
-    key: str
-    """The row's key in the results."""
-    logs: Path
-    """Its logs' path less the ``.train.log`` / ``.eval.log`` ending: a failure prints the last one's end."""
+    key: str  # the row's key in the results
+    logs: Path  # its logs' path less ``.train.log`` / ``.eval.log``: a failure prints the last one's end
     execute: Callable[[], dict]
 
 
@@ -267,8 +249,7 @@ def summary(row: dict) -> str:
 
 
 def run_all(jobs: Sequence[Job], path: Path, at_once: int = 1, again: str | None = None) -> None:
-    """Run the jobs not yet recorded in ``path`` (all, ``again``), ``at_once`` at a time, in their order; each finished
-    row is recorded at once."""
+    """Run the jobs not yet recorded in ``path`` (all, ``again``), ``at_once`` at a time, recording each as it ends."""
     done = {} if again else load_results(path)
     todo = [job for job in jobs if job.key not in done]
     lock = threading.Lock()
@@ -293,13 +274,14 @@ def run_all(jobs: Sequence[Job], path: Path, at_once: int = 1, again: str | None
 
 def record(path: Path, row: dict, again: str | None = None) -> None:
     """Append a finished row. Run ``--again``, a recorded key's earlier row first moves to ``repeats.jsonl`` with the
-    note (the results keep one row a key), so nothing recorded is lost and the report can set the two side by side."""
+    note: the results keep one row a key, and nothing recorded is lost."""
     held = load_results(path) if again else {}
     earlier = held.pop(row["key"], None)
     if earlier is not None:
         with path.with_name(REPEATS).open("a") as fh:
             fh.write(json.dumps(earlier | {"repeat": again}) + "\n")
-        save_results(path, held)
+        write_jsonl(path.with_suffix(".tmp"), held.values())
+        path.with_suffix(".tmp").replace(path)  # atomically
     with path.open("a") as fh:
         fh.write(json.dumps(row) + "\n")
 
@@ -324,7 +306,7 @@ def table(head: Sequence[str], rows: Iterable[str]) -> list[str]:
 
 
 def titled_table(intro: str, head: Sequence[str], rows: list[str]) -> list[str]:
-    """``table`` after a paragraph that says what it holds; nothing where there are no rows."""
+    """``table`` after a paragraph; nothing where there are no rows."""
     return [intro, "", *table(head, rows), ""] if rows else []
 
 
@@ -348,15 +330,14 @@ def update_benchmarks_md(path: Path, begin: str, end: str, body: list[str]) -> s
 
 
 def write_section(markdown: Path, name: str, script: str, body: list[str]) -> None:
-    """Print a script's section and write it into ``markdown`` between its markers (not where that is 'none')."""
+    """Print a script's section and write it into ``markdown`` (not where that is 'none')."""
     print("\n".join(body))
     if str(markdown).lower() != "none":
         update_benchmarks_md(markdown, *markers(name, script), body)
 
 
 def section_head(title: str, command: str, settings: str | None = None, machine: str | None = None) -> list[str]:
-    """The opening lines every BENCHMARKS.md section shares: title, machine and command, what was run. ``machine``
-    replaces this machine's description where the rows were recorded elsewhere."""
+    """A BENCHMARKS.md section's opening lines: title, machine (this one unless given) and command, what was run."""
     return [
         f"## {title}",
         "",
@@ -373,7 +354,6 @@ def machine_description() -> str:
 
 
 def cpu_and_cores() -> str:
-    """This machine's CPU model and core count: what a result row records of where it ran."""
     cpu = platform.processor() or platform.machine()
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -392,8 +372,7 @@ QUALITY_RESULTS = REPO / "benchmarks" / "results" / "quality" / "results.jsonl"
 EQUAL_TIME_RESULTS = REPO / "benchmarks" / "results" / "equal_time" / "results.jsonl"
 EQUAL_ITERATIONS_RESULTS = REPO / "benchmarks" / "results" / "equal_iterations" / "results.jsonl"
 REPEATS = "repeats.jsonl"
-"""Beside the results: other runs of a key that was run again (the results keep one row a key), each with a
-``repeat`` note that says what that run was (on a GPU or on more than one CPU thread a run is not bit-reproducible)."""
+"""Beside the results: other runs of a key that was run again, each with a ``repeat`` note that says what it was."""
 
 
 @dataclass(frozen=True)
@@ -401,12 +380,10 @@ class Protocol:
     name: str
     iters: int
     rays: int
-    grid: tuple[int, int]
-    """The grid's initial and final side."""
+    grid: tuple[int, int]  # the grid's initial and final side
     lego_downscale: int
     scenes: Sequence[str] = ("lego", "fern")
-    curve_of: str | None = None
-    """The protocol of the same sizes at 800 iterations, whose val choice a curve along this one trains."""
+    curve_of: str | None = None  # the protocol of the same sizes at 800 iterations whose val choice a curve trains
 
     def flags(self) -> list[str]:
         return [*size_flags(self.rays, self.grid), "--steps-per-save", "100000"]
@@ -424,7 +401,6 @@ class Suite:
     grids: list[dict]
     curve_every: int
     equal_time: dict
-    """Methods, scenes and budgets of the equal-time stage, and what its report compares them with."""
 
     def parser_args(self, scene: str, protocol: str) -> list[str]:
         args = list(self.scenes[scene]["parser"])
@@ -499,7 +475,7 @@ CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "mirror", "zfree")
 
 
 def setting_flags(setting: str) -> list[str]:
-    """The ``fourierf-train`` flags a setting's name stands for (later flags win over the protocol's own sizes)."""
+    """The ``fourierf-train`` flags a setting's name stands for."""
     flags = []
     for token in setting.split("-"):
         if token in TOKENS:
@@ -517,13 +493,8 @@ def applies(method: str, setting: str) -> bool:
     return method != "tensorf-vm" or not any(part.startswith(CURRICULUM_ONLY) for part in setting.split("-"))
 
 
-def point_run(method: str, protocol: Protocol, setting: str, seed: int) -> Run:
-    """One point of the suite as a run (its key, under the scene, is the point's key in the results)."""
-    return Run(method, protocol.iters, seed, f"{protocol.name}_{setting}")
-
-
 def rows_by(results: dict[str, dict], scene: str, protocol: str, method: str) -> dict[str, list[dict]]:
-    """Recorded rows of one (scene, protocol, method), grouped by setting."""
+    """Recorded rows of one (scene, protocol, method) by setting."""
     out: dict[str, list[dict]] = {}
     for r in results.values():
         if (r["scene"], r["protocol"], r["method"]) == (scene, protocol, method):
@@ -532,7 +503,7 @@ def rows_by(results: dict[str, dict], scene: str, protocol: str, method: str) ->
 
 
 def val_by_seed(rows: list[dict], seeds: Sequence[int]) -> dict[int, float]:
-    """A setting's val PSNR per seed of ``seeds`` that it ran on, in their order (one row a seed: the key names it)."""
+    """A setting's val PSNR per seed of ``seeds`` that it ran on, in their order."""
     recorded = {r["seed"]: r["val_psnr"] for r in rows}
     return {seed: recorded[seed] for seed in seeds if seed in recorded}
 

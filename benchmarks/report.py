@@ -24,19 +24,17 @@ from harness import (
     fmt,
     load_results,
     load_suite,
-    markers,
     md_row,
     read_jsonl,
     rows_by,
     section_head,
     table,
     titled_table,
-    update_benchmarks_md,
     val_by_seed,
+    write_section,
 )
 
 SUITE = load_suite()
-QUALITY, TIMED, COUNTED = (markers(name, "report.py") for name in ("quality", "equal-time", "equal-iterations"))
 F, T = "fourierf-vm", "tensorf-vm"
 
 
@@ -594,12 +592,12 @@ def main() -> None:
     ap.add_argument("--figure", type=Path, default=REPO / FIGURE, help="the equal-time figure (SVG)")
     args = ap.parse_args()
     timed_rows, counted_rows = (list(load_results(p).values()) for p in (args.equal_time, args.equal_iterations))
-    for marks, body in (
-        (QUALITY, quality_section(load_results(args.results), read_jsonl(args.results.with_name(REPEATS)))),
-        (TIMED, equal_time_section(timed_rows, SUITE)),
-        (COUNTED, equal_iterations_section(counted_rows, SUITE)),
+    for name, body in (
+        ("quality", quality_section(load_results(args.results), read_jsonl(args.results.with_name(REPEATS)))),
+        ("equal-time", equal_time_section(timed_rows, SUITE)),
+        ("equal-iterations", equal_iterations_section(counted_rows, SUITE)),
     ):
-        print(update_benchmarks_md(args.markdown, *marks, body))
+        write_section(args.markdown, name, "report.py", body)
     args.figure.write_text(figure(timed_rows, SUITE))
 
 

@@ -37,7 +37,6 @@ from harness import (
     evaluate,
     load_results,
     load_suite,
-    point_run,
     read_metrics,
     record,
     rows_by,
@@ -244,7 +243,7 @@ def merge(path: Path, sources: Sequence[Path], again: str | None) -> list[str]:
 
 
 def point(scene: str, protocol: str, method: str, setting: str, seed: int, suite: Suite = SUITE) -> Point:
-    return scene, protocol, setting, point_run(method, suite.protocols[protocol], setting, seed)
+    return scene, protocol, setting, Run(method, suite.protocols[protocol].iters, seed, f"{protocol}_{setting}")
 
 
 def sweep_plan(args: argparse.Namespace, suite: Suite = SUITE) -> list[Point]:

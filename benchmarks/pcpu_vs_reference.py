@@ -75,11 +75,6 @@ def our_run(shared: Path, seed: int, work: Path) -> dict:
     }
 
 
-def seconds_to(curve: dict, elapsed: dict, target: float) -> float | None:
-    """Training seconds at the first evaluated step whose PSNR reaches ``target`` (None: never)."""
-    return next((elapsed[step] for step in sorted(curve, key=int) if curve[step] >= target), None)
-
-
 def section(rows: list[dict]) -> list[str]:
     """Per seed the ratios reference / ours (time to the reference's PSNR, per iteration, per run), PSNRs and peak
     RSS; then their medians."""
@@ -97,7 +92,8 @@ def section(rows: list[dict]) -> list[str]:
     ratios: dict[str, list[float]] = {"quality": [], "iteration": [], "run": [], "psnr": []}
     for r in rows:
         ref, ours = r["reference"], r["ours"]
-        reach = seconds_to(ours["psnr_curve"], ours["elapsed"], ref["test_psnr"])
+        curve = ours["psnr_curve"]  # training seconds at the first evaluated step reaching the reference's PSNR:
+        reach = next((ours["elapsed"][s] for s in sorted(curve, key=int) if curve[s] >= ref["test_psnr"]), None)
         quality = ref["train_wall_s"] / reach if reach else None
         iteration = ref["final_phase_s_per_it"] / ours["final_phase_s_per_it"]
         run = ref["train_wall_s"] / ours["train_wall_s"]

@@ -22,12 +22,6 @@ from fourierf_plugin.sfm.alignment import pose_errors
 TARGETS = {"registered": 18, "rotation_deg_median": 1.0, "centre_percent_median": 2.0}
 
 
-def recovered_poses(scene: Path) -> dict[str, np.ndarray]:
-    """Camera-to-world (OpenGL axes) of each registered photo, by file name, from the written transforms.json."""
-    content = json.loads((scene / "transforms.json").read_text())
-    return {Path(f["file_path"]).name: np.asarray(f["transform_matrix"]) for f in content["frames"]}
-
-
 def section(result: dict) -> list[str]:
     r = result
     return [
@@ -53,7 +47,8 @@ def main() -> dict:
     report = process_data(["images", "--data", str(fern / "images_8"), "--output-dir", str(scene), "--overwrite"])
     wall = time.perf_counter() - started
     reference = {f.image_path.name: f.camera_to_world for f in capture_from_llff(fern, "images_8").frames}
-    estimated = recovered_poses(scene)
+    frames = json.loads((scene / "transforms.json").read_text())["frames"]  # camera-to-world, OpenGL axes
+    estimated = {Path(f["file_path"]).name: np.asarray(f["transform_matrix"]) for f in frames}
     names = [n for n in reference if n in estimated]
     errors = pose_errors(np.stack([estimated[n] for n in names]), np.stack([reference[n] for n in names]))
     result = {

@@ -40,8 +40,7 @@ F, T = "fourierf-vm", "tensorf-vm"
 
 # -- few-shot quality: each method at its own val-chosen setting per scene and protocol ----------------------------
 def val_cell(rows: list[dict], seeds: Sequence[int]) -> str:
-    """A setting's val PSNR for the sweep table: the first seed's, and the mean over every seed where all were run,
-    else over the seeds that were (named, as such a mean does not take part in the choice)."""
+    """A setting's val PSNR: the first seed's, and the mean over the seeds run (named where not all were)."""
     vals = val_by_seed(rows, seeds)
     first = f"{vals[seeds[0]]:.2f}" if seeds[0] in vals else "—"
     mean = float(np.mean(list(vals.values()))) if vals else 0.0
@@ -53,8 +52,7 @@ def val_cell(rows: list[dict], seeds: Sequence[int]) -> str:
 
 
 def curve_table(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
-    """Val and test PSNR along each curve run's training, next to the 800-iteration run of the same sizes and setting,
-    or the budget rule's setting at 800 where the rule names them apart (does quality hold as the budget grows?)."""
+    """Val and test PSNR along each curve run, next to the 800-iteration run of its setting (the rule's at 800)."""
     pairs = {(m, r["at_3000"]): r["at_800"] for m, r in suite.rule_along_the_budget.items()}
     pairs[(F, "lr0.08-tvconst-ramp0.2667-tv4")] = "lr0.08-tvconst-tv4"  # the band open by step 800 of 3000
     lines = []
@@ -113,8 +111,7 @@ def rule_along_the_budget(results: dict[str, dict], suite: Suite = SUITE) -> lis
 
 
 def targets_table(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
-    """Each target as measured: both methods' choices, the lead in test PSNR (per seed where both ran the same
-    seeds) and by how much it is met or missed."""
+    """Each target as measured: both methods' choices, the lead in test PSNR and by how much it is met or missed."""
     lines = []
     for t in suite.targets:
         picked, rows = {}, {}
@@ -150,8 +147,7 @@ def targets_table(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
 
 
 def later_seeds_table(results: dict[str, dict], repeats: Sequence[dict], suite: Suite = SUITE) -> list[str]:
-    """Every setting run on each later seed on a GPU, with its other runs: settings compared where they ran side by
-    side, read against the spread between repeats (GPU training is not bit-reproducible)."""
+    """Every setting run on each later seed on a GPU, beside its repeats (GPU training is not bit-reproducible)."""
     later = suite.seeds[1:]
     groups: dict[tuple[str, str, str, str, str], dict[int, dict]] = {}
     for r in [*results.values(), *repeats]:
@@ -182,8 +178,7 @@ def later_seeds_table(results: dict[str, dict], repeats: Sequence[dict], suite: 
 
 
 def threads_cell(rows: Iterable[dict]) -> str:
-    """The CPU threads the rows trained on, as one cell: ``1`` where every CPU row says one (bit-reproducible), ``?``
-    for rows that do not record it, ``—`` where none ran on a CPU."""
+    """The CPU threads the rows trained on (``?``: not recorded; ``—``: none ran on a CPU)."""
     cpu = [r for r in rows if r.get("device") == "cpu"]
     if not cpu:
         return "—"
@@ -191,8 +186,7 @@ def threads_cell(rows: Iterable[dict]) -> str:
 
 
 def cpu_reruns_table(results: dict[str, dict], repeats: Sequence[dict]) -> list[str]:
-    """Every CPU run of a key that ran twice, beside the row the report reads: how far one setting and seed moved
-    between two CPU runs (on more than one thread, or across a change of code) is the spread a difference must clear."""
+    """Every CPU run of a key that ran twice, beside the row the report reads: the spread a difference must clear."""
     lines = []
     for other in sorted((r for r in repeats if r.get("device") == "cpu" and r["key"] in results),
                         key=lambda r: r["key"]):  # fmt: skip
@@ -211,9 +205,7 @@ def cpu_reruns_table(results: dict[str, dict], repeats: Sequence[dict]) -> list[
 
 
 def comparable_seconds(rows: dict[str, list[dict]]) -> str:
-    """Each method's mean training seconds over its runs on one device both methods ran on (the one holding most of
-    their runs), as the summary's cell: a mean over a CPU run and two GPU runs set beside three CPU runs would read as
-    a speed gap."""
+    """Each method's mean training seconds on the one device both ran most of their runs on."""
     shared = sorted(set.intersection(*({r["device"] for r in rows[m]} for m in rows)))
     if not shared:
         return "— (no shared device)"
@@ -223,8 +215,7 @@ def comparable_seconds(rows: dict[str, list[dict]]) -> str:
 
 
 def recording_machines(rows: Iterable[dict]) -> str:
-    """Where the rows ran: they span many machines, so the machine that writes the report says nothing of them.
-    Rows that record their CPU are named; the others are not."""
+    """Where the rows ran (many machines; those that record their CPU named), not the machine writing the report."""
     named = sorted({r["machine"] for r in rows if "machine" in r})
     those = f"; rows that record theirs: {'; '.join(named)}" if named else ""
     return f"several machines (2-core CPUs, torch 2.13.0+cpu; an H100 where the device is cuda){those}"
@@ -332,9 +323,8 @@ def timed(rows: Sequence[dict], scene: str, method: str) -> list[dict]:
 
 
 def time_to_psnr(points: Sequence[tuple[float, float]], target: float) -> tuple[float, bool] | None:
-    """Seconds to reach ``target`` PSNR along (seconds, PSNR) points sorted by time: linear in log time between the
-    last point below it and the first at or above it; (the first point's time, True) where that one already reaches it
-    (an upper bound), None where none does."""
+    """Seconds to reach ``target`` PSNR along (seconds, PSNR) points sorted by time, linear in log time; (the first
+    point's time, True) where that one already reaches it (an upper bound), None where none does."""
     for i, (seconds, psnr) in enumerate(points):
         if psnr < target:
             continue
@@ -358,8 +348,7 @@ def time_cell(points: Sequence[tuple[float, float]], target: float) -> str:
 
 
 def speed_cell(rows: Sequence[dict], scene: str, method: str, baseline: str) -> str:
-    """A method's mean seconds per iteration over the baseline's on a scene, over their trained points, else over the
-    trainer's estimates in their too-short points ("est.")."""
+    """A method's mean seconds per iteration over the baseline's on a scene (est.: from too-short points' estimates)."""
     means = []
     for m in (method, baseline):
         own = [r["seconds_per_iteration"] for r in timed(rows, scene, m)]

@@ -198,8 +198,7 @@ ROW_FIELDS = ("key", "scene", "protocol", "method", "setting", "seed", "val_psnr
 
 
 def read_rows(source: Path, suite: Suite = SUITE) -> list[dict]:
-    """The rows of a results file written elsewhere (another results path, the device machine), checked for what the
-    report reads; ValueError names the file, the line and the fix."""
+    """The rows of a results file written elsewhere, checked for what the report reads (ValueError names the line)."""
     if not source.is_file():
         raise ValueError(f"{source}: no such results file; pass the --results path a sweep, seeds or curve stage wrote")
     rows = []
@@ -222,10 +221,8 @@ def read_rows(source: Path, suite: Suite = SUITE) -> list[dict]:
 
 
 def merge(path: Path, sources: Sequence[Path], again: str | None) -> list[str]:
-    """Record the rows of ``sources`` in the results at ``path``, as ``run_all`` records a finished run: a recorded key
-    is skipped, or, ``again``, its earlier row moves to the repeats with that note. Every source is read and checked
-    before anything is written. Why: runs trained side by side as separate processes (or on the device machine) write
-    their own results files, and one process must move rows between the files."""
+    """Record the rows of ``sources`` (runs trained elsewhere) as ``run_all`` records a finished run, every source
+    checked before anything is written."""
     if any(source.resolve() == path.resolve() for source in sources):
         raise ValueError(f"{path}: the results cannot be merged into themselves; pass the other run's --results file")
     rows = [row for source in sources for row in read_rows(source)]
@@ -276,8 +273,7 @@ def seeds_plan(args: argparse.Namespace, suite: Suite = SUITE) -> list[Point]:
 
 
 def curve_plan(args: argparse.Namespace, suite: Suite = SUITE) -> list[Point]:
-    """Each method at ``--only``'s settings, else at the val choice of the 800-iteration protocol of the same sizes
-    (the protocol's ``curve_of``), first seed."""
+    """Each method at ``--only``'s settings, else at the val choice of the protocol's ``curve_of``, first seed."""
     results = load_results(args.results)
     plan = []
     for p in args.protocol:
@@ -298,37 +294,29 @@ def curve_plan(args: argparse.Namespace, suite: Suite = SUITE) -> list[Point]:
 def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("stage", choices=("sweep", "seeds", "curve", "merge", "equal-time", "equal-iterations"))
-    ap.add_argument("--protocol", nargs="+", choices=tuple(suite.protocols), default=None,
-                    help="default: cpu-800 mid-3000 mid-800 (the curve stage: cpu-3000)")  # fmt: skip
+    ap.add_argument("--protocol", nargs="+", choices=tuple(suite.protocols), help="default: cpu-800 mid-3000 mid-800; "
+                    "curve: cpu-3000")  # fmt: skip
     ap.add_argument("--scene", nargs="+", choices=tuple(suite.settings), default=list(suite.settings))
-    ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data",
-                    help="folder holding blender/lego and llff/fern")  # fmt: skip
+    ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data", help="holds blender/lego, llff/fern")
     ap.add_argument("--lpips", type=Path, default=REPO.parent / "shared" / "lpips" / "lpips_alex_v0.1.pth")
-    ap.add_argument("--work", type=Path, default=None, help="run folders and logs (default: outputs/bench_STAGE)")
-    ap.add_argument("--results", type=Path, default=None,
-                    help="one row per finished run (finished runs are skipped); default: the stage's file under "
-                         "benchmarks/results/")  # fmt: skip
-    ap.add_argument("--budget", nargs="+", default=None,
-                    help="equal-time: the --time-budget of each point; equal-iterations: one budget of iterations "
-                         "such as 200it (default: the suite's)")  # fmt: skip
+    ap.add_argument("--work", type=Path, help="run folders and logs (default: outputs/bench_STAGE)")
+    ap.add_argument("--results", type=Path, help="one row a finished run (default: the stage's, benchmarks/results/)")
+    ap.add_argument("--budget", nargs="+", help="equal-time: each point's --time-budget; equal-iterations: one count "
+                    "such as 200it (default: the suite's)")  # fmt: skip
     ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
-    ap.add_argument("--only", nargs="+", default=None, help="sweep only these settings (names from suite.toml)")
+    ap.add_argument("--only", nargs="+", help="sweep only these settings (names from suite.toml)")
     stage_methods = {
         "equal-time": suite.equal_time["methods"],
         "equal-iterations": suite.equal_time["iterations"]["methods"],
     }
     every_method = dict.fromkeys([*suite.methods, *(m for ms in stage_methods.values() for m in ms)])
-    ap.add_argument("--methods", nargs="+", choices=tuple(every_method), default=None, help="run only these methods")
-    ap.add_argument("--seeds", nargs="+", type=int, choices=suite.seeds[1:], default=None,
-                    help="the seeds stage runs only these of the later seeds (default: all)")  # fmt: skip
+    ap.add_argument("--methods", nargs="+", choices=tuple(every_method), help="run only these methods")
+    ap.add_argument("--seeds", nargs="+", type=int, choices=suite.seeds[1:], help="the seeds stage's later seeds")
     ap.add_argument("--jobs", type=int, default=1, help="trainings at once")
-    ap.add_argument("--threads", type=int, default=1,
-                    help="CPU threads per training and its evaluations (1: a CPU run is bit-reproducible)")  # fmt: skip
-    ap.add_argument("--again", metavar="NOTE", default=None,
-                    help="run recorded runs again too; each earlier row moves to repeats.jsonl with NOTE (what "
-                         "differed then, e.g. 'threads not recorded')")  # fmt: skip
-    ap.add_argument("--rows", nargs="+", type=Path, default=None, metavar="FILE",
-                    help="merge: results files written elsewhere (another --results, the device)")  # fmt: skip
+    ap.add_argument("--threads", type=int, default=1, help="CPU threads a run (1: a CPU run is bit-reproducible)")
+    ap.add_argument("--again", metavar="NOTE", help="run recorded runs again too, each earlier row to repeats.jsonl "
+                    "with NOTE (what differed then)")  # fmt: skip
+    ap.add_argument("--rows", nargs="+", type=Path, metavar="FILE", help="merge: results files written elsewhere")
     args = ap.parse_args(argv)
     stage, timed, counted = args.stage, args.stage == "equal-time", args.stage == "equal-iterations"
     results = {"equal-time": EQUAL_TIME_RESULTS, "equal-iterations": EQUAL_ITERATIONS_RESULTS}

@@ -75,16 +75,27 @@ SAVE_BYTES_PER_SECOND = 200e6
 """How fast a checkpoint is written (serialised and flushed to disk): an estimate for a local disk."""
 
 
-def grid_growth(config: Any) -> float:
-    """The run's mean grid side over its initial one, iteration by iteration along the upsample schedule: a ray's
-    samples, and so an iteration's cost, grow with the side."""
+def grid_growth(config: Any, upto: int | None = None) -> float:
+    """The run's mean grid side over its initial one, iteration by iteration along the upsample schedule, over its
+    first ``upto`` iterations (all by default): a ray's samples, and so an iteration's cost, grow with the side."""
     field, iterations = config.pipeline.model.field, config.max_num_iterations
+    end = iterations if upto is None else max(1, min(upto, iterations))
     steps = steps_from_fractions(field.upsample_fractions, iterations)
     counts = [field.n_voxels_init, *voxel_counts(field.n_voxels_init, field.n_voxels_final, len(steps))]
     edges = [0, *steps, iterations]
     spans = zip(edges, edges[1:], counts, strict=False)  # one count per span; edges has one more entry
-    total = sum((end - start) * (n / field.n_voxels_init) ** (1 / 3) for start, end, n in spans)
-    return total / iterations
+    total = sum(
+        (min(stop, end) - start) * (n / field.n_voxels_init) ** (1 / 3) for start, stop, n in spans if start < end
+    )
+    return total / end
+
+
+def fitting_iterations(config: Any, done: int, seconds: float, available_s: float) -> int:
+    """The count whose whole run fits ``available_s``, at the cost ``config``'s run measured over its first ``done``
+    iterations (``seconds``): that cost per unit of grid side, times the whole run's mean side (a run cut short saw
+    fewer of its upsamples than a whole run does)."""
+    per_side = seconds / (done * grid_growth(config, done))
+    return max(1, math.floor(available_s / (per_side * grid_growth(config))))
 
 
 def run_shape(config: Any) -> float:

@@ -23,7 +23,7 @@ from fourierf_plugin.accel.config import uses_gpu_paths
 from fourierf_plugin.configs.base import InstantiateConfig, save_config
 from fourierf_plugin.data.dataparser_transforms import write_run_frame
 from fourierf_plugin.engine.checkpoint import list_checkpoints, load_latest_checkpoint, save_checkpoint
-from fourierf_plugin.engine.estimates import describe_cost
+from fourierf_plugin.engine.estimates import describe_cost, fitting_iterations
 from fourierf_plugin.engine.health import DEAD_FIELD_FIX, dead_field_problem, flat_colour_psnr
 from fourierf_plugin.engine.machine import pick_device, seed_everything
 from fourierf_plugin.engine.observers import (
@@ -397,6 +397,7 @@ class Trainer:
             done_record["planned_train_seconds"] = c.planned_train_seconds
         if cut_at_budget:
             done_record["planned_iterations"] = c.max_num_iterations
+            done_record["fitting_iterations"] = fitting_iterations(c, done, elapsed, c.train_deadline_seconds)
         if self.device.type == "cuda":
             done_record["peak_device_memory_gb"] = torch.cuda.max_memory_allocated(self.device) / 2**30
         if timer is not None:
@@ -417,7 +418,8 @@ class Trainer:
             self.console.print(
                 f"[yellow]time budget {c.time_budget} reached after {done} of the {c.max_num_iterations} planned "
                 f"iterations:[/yellow] training stopped and saved there, before the end of its schedules; resume with "
-                f"--load-dir {self.run_dir} to finish them"
+                f"--load-dir {self.run_dir} to finish them, or, for a whole run within the budget on this machine, "
+                f"train again with --max-num-iterations {done_record['fitting_iterations']} (from this run's cost)"
             )
         if shown.get("revived_batches"):
             self.console.print(f"a dead density field was revived on {shown['revived_batches']:.0f} training batches")

@@ -179,9 +179,27 @@ def test_a_run_past_its_deadline_stops_saves_and_says_so(tmp_path, capsys):
     run_dir = Trainer(config).train()
     done = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()][-1]
     assert done["event"] == "done" and done["step"] == 1 and done["planned_iterations"] == 30
+    assert done["fitting_iterations"] == 1, "no time left: the fewest iterations"
     assert list_checkpoints(run_dir / "checkpoints")[-1].name == checkpoint_name(1)
     said = " ".join(capsys.readouterr().out.split())  # the console wraps long lines
-    assert "reached after 1 of the 30 planned iterations" in said
+    assert "reached after 1 of the 30 planned iterations" in said and "--max-num-iterations 1 (from this run's" in said
+
+
+def test_the_count_that_fits_follows_the_measured_cost_and_the_upsamples_still_to_come():
+    import copy
+
+    from fourierf_plugin.engine.estimates import fitting_iterations, grid_growth
+    from fourierf_plugin.method_configs import all_methods
+
+    config = copy.deepcopy(all_methods["fourierf-vm"])
+    config.max_num_iterations = 1000
+    config.pipeline.model.field.upsample_fractions = ()
+    assert fitting_iterations(config, 100, 10.0, 60.0) == 600, "one grid: the measured rate"
+    config.pipeline.model.field.upsample_fractions = (0.5,)
+    before = fitting_iterations(config, 100, 10.0, 60.0)
+    assert before == int(600 / grid_growth(config)) < 600, "cut before its upsample: a whole run costs more a step"
+    assert fitting_iterations(config, 1000, 100.0, 60.0) == 600, "a whole run's rate is the rate of a whole run"
+    assert grid_growth(config, 500) == 1.0 < grid_growth(config, 750) < grid_growth(config)
 
 
 def test_a_run_within_its_deadline_runs_every_iteration(tmp_path):

@@ -16,8 +16,7 @@ import shutil
 import statistics
 import subprocess
 import sys
-from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 from harness import (
@@ -43,29 +42,13 @@ INSTALLED = {"method_configs": "fourierf_plugin/method_configs", "data/parsers":
 MODULE = (sys.executable, "-P", "-m")
 
 
-@dataclass(frozen=True)
-class Scene:
-    data: str  # the scene folder under <shared>/data
-    flags: tuple[str, ...]  # method flags beyond P-CPU's sizes
-    parser: tuple[str, ...]
-    title: str  # its BENCHMARKS.md section's title and marker
-    marker: str
-
-    @property
-    def name(self) -> str:
-        return Path(self.data).name
-
-    def for_option(self) -> Scene:
-        """The same scene, reporting into a section of its own: an option's cost, not a change to a default."""
-        return replace(self, title=f"Cost of an option on P-CPU {self.name} (interleaved A/B of flags)",
-                       marker=f"{self.marker}_option")  # fmt: skip
-
-
-SCENES = {
-    "lego": Scene("blender/lego", tuple(OFFICIAL_OPTIMISER), tuple(PCPU_LEGO_PARSER),
-                  "Speed A/B of a change to a default (lego, interleaved)", "ab_speed"),
-    "fern": Scene("llff/fern", (), ("llff-data", "--num-views", "3"),
-                  "Speed A/B of a change to a forward-facing default (fern, interleaved)", "ab_speed_fern"),
+SCENES = {  # per scene: its folder under <shared>/data, method flags beyond P-CPU's sizes, parser flags, and its
+    # BENCHMARKS.md section's title and marker
+    "lego": {"data": "blender/lego", "flags": OFFICIAL_OPTIMISER, "parser": PCPU_LEGO_PARSER,
+             "title": "Speed A/B of a change to a default (lego, interleaved)", "marker": "ab_speed"},
+    "fern": {"data": "llff/fern", "flags": [], "parser": ["llff-data", "--num-views", "3"],
+             "title": "Speed A/B of a change to a forward-facing default (fern, interleaved)",
+             "marker": "ab_speed_fern"},
 }  # fmt: skip
 FINAL = (600, 800)  # the final phase: after the last upsample (step 560)
 ITERATION_TIMER = """
@@ -92,6 +75,19 @@ for i in range(warmup + iters):
     optimizer.step()
 print((time.perf_counter() - start) / iters)
 """
+
+
+def section_of(scene: str, option: bool) -> tuple[str, str]:
+    """A scene's section title and marker; an option's A/B has a section of its own (its cost, not a new default)."""
+    if option:
+        return f"Cost of an option on P-CPU {scene} (interleaved A/B of flags)", f"{SCENES[scene]['marker']}_option"
+    return SCENES[scene]["title"], SCENES[scene]["marker"]
+
+
+def alternating(rounds: int) -> Iterator[tuple[int, str]]:
+    """(round, side) for ``rounds`` rounds of old and new, alternating which side goes first."""
+    for i in range(rounds):
+        yield from ((i, side) for side in (("old", "new") if i % 2 == 0 else ("new", "old")))
 
 
 def git(*args: str) -> str:
@@ -127,7 +123,7 @@ def revision_label(rev: str | None) -> str:
 
 
 def run_side(
-    code: Path, label: str, seed: int, work: Path, shared: Path, scene: Scene, flags: Sequence[str] = ()
+    code: Path, label: str, seed: int, work: Path, shared: Path, scene: str, flags: Sequence[str] = ()
 ) -> dict:
     """Train and evaluate one P-CPU run of ``scene`` with the package in ``code`` and the side's own ``flags``; its
     timings and PSNR."""
@@ -135,10 +131,11 @@ def run_side(
     out = work / "runs" / label
     shutil.rmtree(out, ignore_errors=True)
     sizes = ["--seed", str(seed), "--max-num-iterations", "800", "--log-every", "50", *GRID_FLAGS]
-    train = train_cmd("fourierf-vm", shared / "data" / scene.data, out, "run", *sizes, *scene.flags, *flags,
-                      *scene.parser, program=(*MODULE, "fourierf_plugin.scripts.train"))  # fmt: skip
+    train = train_cmd("fourierf-vm", shared / "data" / SCENES[scene]["data"], out, "run", *sizes,
+                      *SCENES[scene]["flags"], *flags, *SCENES[scene]["parser"],
+                      program=(*MODULE, "fourierf_plugin.scripts.train"))  # fmt: skip
     wall, _ = run_checked(train, work / f"{label}.train.log", "training", env)
-    run_dir = out / scene.name / "fourierf-vm" / "run"
+    run_dir = out / scene / "fourierf-vm" / "run"
     lpips = str(shared / "lpips/lpips_alex_v0.1.pth")
     result, _ = eval_report(run_dir, work, label, "--render-dir", "none", "--lpips-weights", lpips, env=env,
                             program=(*MODULE, "fourierf_plugin.scripts.eval"))  # fmt: skip
@@ -205,11 +202,10 @@ def write_report(work: Path, markdown: Path) -> None:
     if missing:
         sys.exit(f"error: no A/B recorded in {work} (missing {', '.join(missing)}); run the A/B first")
     timings, meta = (json.loads((work / name).read_text()) for name in ("iterations.json", "meta.json"))
-    scene = SCENES[meta.get("scene", "lego")]  # a record without a scene is lego's
-    if meta.get("old_flags") or meta.get("new_flags"):
-        scene = scene.for_option()
+    # a record without a scene is lego's
+    title, marker = section_of(meta.get("scene", "lego"), bool(meta.get("old_flags") or meta.get("new_flags")))
     lines = summary(read_jsonl(work / "results.jsonl"), timings, meta)
-    write_section(markdown, scene.marker, "ab_speed.py", [*section_head(scene.title, meta["command"]), *lines, ""])
+    write_section(markdown, marker, "ab_speed.py", [*section_head(title, meta["command"]), *lines, ""])
 
 
 def main() -> None:
@@ -225,38 +221,33 @@ def main() -> None:
     ap.add_argument("--iteration-repeats", type=int, default=6, help="alternating in-process timings per side")
     ap.add_argument("--report", action="store_true", help="only rewrite BENCHMARKS.md from the A/B recorded in --work")
     args = ap.parse_args()
-    scene = SCENES[args.scene]
     try:
         flags = {"old": shlex.split(args.old_flags), "new": shlex.split(args.new_flags)}
     except ValueError as err:
         ap.error(f"--old-flags / --new-flags: {err}; quote each side's flags as one shell string")
-    args.work = args.work or REPO / "outputs" / f"bench_{scene.marker}"  # bench_ab_speed, bench_ab_speed_fern
+    args.work = args.work or REPO / "outputs" / f"bench_{SCENES[args.scene]['marker']}"
     if args.report:
         return write_report(args.work, args.markdown)
     args.work.mkdir(parents=True, exist_ok=True)
     labels = {side: revision_label(rev) + (f" + {shlex.join(flags[side])}" if flags[side] else "")
               for side, rev in (("old", args.old), ("new", args.new))}  # fmt: skip
     codes = {"old": export_tree(args.old, args.work / "code-old"), "new": export_tree(args.new, args.work / "code-new")}
-    rows = []
-    for i in range(args.pairs):
-        seed = args.seeds[i % len(args.seeds)]
-        for side in ("old", "new") if i % 2 == 0 else ("new", "old"):
-            rows.append(run_side(codes[side], f"{side}-{i}", seed, args.work, args.shared, scene, flags[side]))
-            rows[-1]["side"] = side
-            print(json.dumps(rows[-1]), flush=True)
+    rows, seeds = [], [args.seeds[i % len(args.seeds)] for i in range(args.pairs)]
+    for i, side in alternating(args.pairs):
+        row = run_side(codes[side], f"{side}-{i}", seeds[i], args.work, args.shared, args.scene, flags[side])
+        rows.append(row | {"side": side})
+        print(json.dumps(rows[-1]), flush=True)
     write_jsonl(args.work / "results.jsonl", rows)
     # The final phase again, with less noise: 40 iterations at step 700 on each side's own final state (equal seeds
     # train identically), in short processes alternating old, new, old, ...
-    first = {side: args.work / "runs" / f"{side}-0" / scene.name / "fourierf-vm" / "run" for side in ("old", "new")}
+    first = {side: args.work / "runs" / f"{side}-0" / args.scene / "fourierf-vm" / "run" for side in ("old", "new")}
     timings: dict[str, list[float]] = {"old": [], "new": []}
-    for i in range(args.iteration_repeats):
-        for side in ("old", "new") if i % 2 == 0 else ("new", "old"):
-            timings[side].append(time_iterations(codes[side], first[side]))
+    for _, side in alternating(args.iteration_repeats):
+        timings[side].append(time_iterations(codes[side], first[side]))
     (args.work / "iterations.json").write_text(json.dumps(timings))
     meta = {
         "old": labels["old"], "new": labels["new"], "describe": args.describe, "pairs": args.pairs, "scene": args.scene,
-        "old_flags": flags["old"], "new_flags": flags["new"],
-        "seeds": [args.seeds[i % len(args.seeds)] for i in range(args.pairs)],
+        "old_flags": flags["old"], "new_flags": flags["new"], "seeds": seeds,
         "command": "python benchmarks/ab_speed.py " + shlex.join(sys.argv[1:]),
     }  # fmt: skip
     (args.work / "meta.json").write_text(json.dumps(meta))

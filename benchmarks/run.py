@@ -209,8 +209,7 @@ def read_rows(source: Path, suite: Suite = SUITE) -> list[dict]:
             row = json.loads(line)
         except json.JSONDecodeError as err:
             raise ValueError(f"{source}:{number}: not a JSON row ({err.msg}); one finished run a line") from None
-        missing = [f for f in ROW_FIELDS if not isinstance(row, dict) or f not in row]
-        if missing:
+        if missing := [f for f in ROW_FIELDS if not isinstance(row, dict) or f not in row]:
             raise ValueError(f"{source}:{number}: a row without {', '.join(missing)}; merge only rows run.py wrote")
         if row["protocol"] not in suite.protocols or row["method"] not in suite.methods:
             what = f"protocol {row['protocol']!r} or method {row['method']!r}"
@@ -225,15 +224,13 @@ def merge(path: Path, sources: Sequence[Path], again: str | None) -> list[str]:
     checked before anything is written."""
     if any(source.resolve() == path.resolve() for source in sources):
         raise ValueError(f"{path}: the results cannot be merged into themselves; pass the other run's --results file")
-    rows = [row for source in sources for row in read_rows(source)]
-    held = load_results(path)
-    lines = []
+    rows, held, lines = [row for source in sources for row in read_rows(source)], set(load_results(path)), []
     for row in rows:
         if row["key"] in held and again is None:
             lines.append(f"{row['key']}: recorded, skipped (--again NOTE keeps this row, the earlier to the repeats)")
             continue
         record(path, row, again)
-        held[row["key"]] = row
+        held.add(row["key"])
         threads = row.get("train_threads", "?")
         lines.append(f"{row['key']}: val {row['val_psnr']:.2f}  test {row['psnr']:.2f}  (threads {threads})")
     return lines
@@ -243,52 +240,29 @@ def point(scene: str, protocol: str, method: str, setting: str, seed: int, suite
     return scene, protocol, setting, Run(method, suite.protocols[protocol].iters, seed, f"{protocol}_{setting}")
 
 
-def sweep_plan(args: argparse.Namespace, suite: Suite = SUITE) -> list[Point]:
-    return [
-        point(scene, p, method, setting, suite.seeds[0])
-        for p in args.protocol
-        for scene in args.scene
-        for setting in suite.settings[scene]
-        for method in args.methods or suite.methods
-        if applies(method, setting) and scene in suite.protocols[p].scenes and (not args.only or setting in args.only)
-    ]
-
-
-def seeds_plan(args: argparse.Namespace, suite: Suite = SUITE) -> list[Point]:
-    results = load_results(args.results)
-    seeds = args.seeds or suite.seeds[1:]
-    plan = []
+def plan(args: argparse.Namespace, suite: Suite = SUITE) -> list[Point]:
+    """The stage's points. A sweep runs every setting that applies at the first seed; seeds (at the later seeds) and
+    curve (at the first) run ``--only``'s settings, else the val choice of the protocol (curve: of its ``curve_of``)."""
+    sweep, results = args.stage == "sweep", {} if args.stage == "sweep" else load_results(args.results)
+    seeds = (args.seeds or suite.seeds[1:]) if args.stage == "seeds" else suite.seeds[:1]
+    points = []
     for p in args.protocol:
-        for scene in args.scene:
-            for method in args.methods or suite.methods:
-                if args.only:  # the seeds of named settings, so that val can choose on more than one seed
-                    settings = [s for s in args.only if applies(method, s)]
-                else:
-                    best = chosen_setting(rows_by(results, scene, p, method), suite.seeds)
-                    if best is None:
-                        sys.exit(f"error: no sweep result for {scene} {p} {method}; run the sweep stage first")
-                    settings = [best]
-                plan += [point(scene, p, method, s, seed) for s in settings for seed in seeds]
-    return plan
-
-
-def curve_plan(args: argparse.Namespace, suite: Suite = SUITE) -> list[Point]:
-    """Each method at ``--only``'s settings, else at the val choice of the protocol's ``curve_of``, first seed."""
-    results = load_results(args.results)
-    plan = []
-    for p in args.protocol:
-        base = suite.protocols[p].curve_of
-        if base is None:
+        if (chosen_of := suite.protocols[p].curve_of if args.stage == "curve" else p) is None:
             curves = [name for name, protocol in suite.protocols.items() if protocol.curve_of]
             sys.exit(f"error: the curve stage runs {' or '.join(curves)}, not {p}")
-        for scene in args.scene:
+        for scene in [s for s in args.scene if not sweep or s in suite.protocols[p].scenes]:
             for method in args.methods or suite.methods:
-                best = chosen_setting(rows_by(results, scene, base, method), suite.seeds)
-                settings = [s for s in args.only if applies(method, s)] if args.only else [best] if best else []
-                if not settings and not args.only:  # --only with curriculum settings alone: tensorf-vm has none
-                    sys.exit(f"error: no {base} sweep result for {scene} {method}; run the sweep or pass --only")
-                plan += [point(scene, p, method, s, suite.seeds[0]) for s in settings]
-    return plan
+                if sweep:
+                    settings = [s for s in suite.settings[scene] if not args.only or s in args.only]
+                elif args.only:
+                    settings = args.only
+                elif (best := chosen_setting(rows_by(results, scene, chosen_of, method), suite.seeds)) is None:
+                    sys.exit(f"error: no sweep result for {scene} {chosen_of} {method}; run the sweep stage first "
+                             "or pass --only")  # fmt: skip
+                else:
+                    settings = [best]
+                points += [point(scene, p, method, s, seed) for s in settings if applies(method, s) for seed in seeds]
+    return points
 
 
 def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argparse.Namespace:
@@ -371,9 +345,8 @@ def main() -> None:
         except UserError as err:  # a --budget that is no duration
             sys.exit(f"error: --budget: {err}")
         return run_all([timed_job(p, args) for p in points], args.results, args.jobs, args.again)
-    plan = {"sweep": sweep_plan, "seeds": seeds_plan, "curve": curve_plan}[args.stage](args)
-    plan.sort(key=lambda p: (-p[3].iters, p[0] != "fern"))  # longest first: the pool ends on short runs
-    run_all([quality_job(p, args) for p in plan], args.results, args.jobs, args.again)
+    points = sorted(plan(args), key=lambda p: (-p[3].iters, p[0] != "fern"))  # longest first: the pool ends on short
+    run_all([quality_job(p, args) for p in points], args.results, args.jobs, args.again)
 
 
 if __name__ == "__main__":

@@ -22,9 +22,9 @@ def ab_speed() -> ModuleType:
     return load_benchmark("ab_speed")
 
 
-def marks(scene: object) -> tuple[str, str]:
-    """The markers a scene's section is written between."""
-    return harness.markers(scene.marker, "ab_speed.py")  # type: ignore[attr-defined]
+def marks(marker: str) -> tuple[str, str]:
+    """The markers a section is written between."""
+    return harness.markers(marker, "ab_speed.py")
 
 
 def _rows() -> list[dict]:
@@ -57,7 +57,7 @@ def test_the_report_rewrites_its_section_from_the_record(ab_speed: ModuleType, t
     (tmp_path / "iterations.json").write_text(json.dumps({"old": [0.2], "new": [0.1]}))
     (tmp_path / "meta.json").write_text(json.dumps(META))
     markdown = tmp_path / "BENCHMARKS.md"
-    begin, end = marks(ab_speed.SCENES["lego"])
+    begin, end = marks(ab_speed.SCENES["lego"]["marker"])
     markdown.write_text(f"# Benchmarks\n\n{begin}\nold text\n{end}\n\n## After\n")
     ab_speed.write_report(tmp_path, markdown)
     text = markdown.read_text()
@@ -87,7 +87,7 @@ def test_meta_names_each_side_by_its_commit(ab_speed: ModuleType) -> None:
 def test_each_scene_reports_into_its_own_section(ab_speed: ModuleType, tmp_path: Path) -> None:
     (tmp_path / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in _rows()))
     (tmp_path / "iterations.json").write_text(json.dumps({"old": [0.2], "new": [0.1]}))
-    lego, fern = ab_speed.SCENES["lego"], ab_speed.SCENES["fern"]
+    (lego_title, lego), (fern_title, fern) = ab_speed.section_of("lego", False), ab_speed.section_of("fern", False)
     markdown = tmp_path / "BENCHMARKS.md"
     markdown.write_text(
         "\n".join([marks(lego)[0], "lego A/B", marks(lego)[1], marks(fern)[0], "fern A/B", marks(fern)[1], ""])
@@ -95,11 +95,11 @@ def test_each_scene_reports_into_its_own_section(ab_speed: ModuleType, tmp_path:
     (tmp_path / "meta.json").write_text(json.dumps(META | {"scene": "fern"}))
     ab_speed.write_report(tmp_path, markdown)
     text = markdown.read_text()
-    assert "lego A/B" in text and "fern A/B" not in text and fern.title in text
+    assert "lego A/B" in text and "fern A/B" not in text and fern_title in text
     (tmp_path / "meta.json").write_text(json.dumps(META))  # a record from before --scene: lego's
     ab_speed.write_report(tmp_path, markdown)
     text = markdown.read_text()
-    assert "lego A/B" not in text and lego.title in text and fern.title in text
+    assert "lego A/B" not in text and lego_title in text and fern_title in text
     assert marks(lego)[0].startswith("<!-- ab_speed:begin"), "the lego section keeps its markers"
 
 
@@ -108,14 +108,13 @@ def test_an_option_ab_reports_into_its_own_section(ab_speed: ModuleType, tmp_pat
     (tmp_path / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in _rows()))
     (tmp_path / "iterations.json").write_text(json.dumps({"old": [0.2], "new": [0.1]}))
     (tmp_path / "meta.json").write_text(json.dumps(META | {"old_flags": [], "new_flags": ["--x", "1"]}))
-    lego = ab_speed.SCENES["lego"]
-    option = lego.for_option()
+    lego, (option_title, option) = ab_speed.SCENES["lego"]["marker"], ab_speed.section_of("lego", True)
     markdown = tmp_path / "BENCHMARKS.md"
     markdown.write_text("\n".join([marks(lego)[0], "lego A/B", marks(lego)[1], ""]))
     ab_speed.write_report(tmp_path, markdown)
     text = markdown.read_text()
-    assert "lego A/B" in text and option.title in text and "| 90.0 | 80.0 | 0.89 |" in text
-    assert all(m in text for m in marks(option)) and option.marker != lego.marker
+    assert "lego A/B" in text and option_title in text and "| 90.0 | 80.0 | 0.89 |" in text
+    assert all(m in text for m in marks(option)) and option != lego
 
 
 def test_unbalanced_side_flags_are_one_clear_error(tmp_path: Path) -> None:

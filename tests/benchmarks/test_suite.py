@@ -88,22 +88,26 @@ def test_settings_run_on_every_seed_are_chosen_by_their_mean_val() -> None:
 
 
 def test_plans_skip_curriculum_settings_for_tensorf_and_keep_only() -> None:
-    args = argparse.Namespace(protocol=["cpu-800"], scene=["lego"], only=["wd0", "wd0-ramp0.5"], methods=None)
-    plan = {(r.method, r.views) for *_, r in runner.sweep_plan(args)}
+    args = argparse.Namespace(
+        stage="sweep", protocol=["cpu-800"], scene=["lego"], only=["wd0", "wd0-ramp0.5"], methods=None
+    )
+    plan = {(r.method, r.views) for *_, r in runner.plan(args)}
     assert plan == {
         ("fourierf-vm", "cpu-800_wd0"), ("tensorf-vm", "cpu-800_wd0"), ("fourierf-vm", "cpu-800_wd0-ramp0.5")
     }  # fmt: skip
     args.only = ["wd0-nodecay-ffinal0.7", "wd0-nodecay-occ"]
-    plan = {(r.method, r.views) for *_, r in runner.sweep_plan(args)}
+    plan = {(r.method, r.views) for *_, r in runner.plan(args)}
     assert ("tensorf-vm", "cpu-800_wd0-nodecay-ffinal0.7") not in plan, "a final cutoff is a curriculum setting"
     assert ("tensorf-vm", "cpu-800_wd0-nodecay-occ") in plan
     args.methods = ["fourierf-vm"]
-    assert {r.method for *_, r in runner.sweep_plan(args)} == {"fourierf-vm"}, "--methods keeps the others out"
-    args = argparse.Namespace(protocol=["mid-800"], scene=["lego", "fern"], only=None, methods=None)
-    assert {p[0] for p in runner.sweep_plan(args)} == {"fern"}, "mid-800 is fern's check"
+    assert {r.method for *_, r in runner.plan(args)} == {"fourierf-vm"}, "--methods keeps the others out"
+    args = argparse.Namespace(stage="sweep", protocol=["mid-800"], scene=["lego", "fern"], only=None, methods=None)
+    assert {p[0] for p in runner.plan(args)} == {"fern"}, "mid-800 is fern's check"
     for single_scene in ("high-3000", "mid-grid300-3000"):
-        args = argparse.Namespace(protocol=[single_scene], scene=["lego", "fern"], only=None, methods=None)
-        assert {p[0] for p in runner.sweep_plan(args)} == {"lego"}, f"{single_scene} measures lego only"
+        args = argparse.Namespace(
+            stage="sweep", protocol=[single_scene], scene=["lego", "fern"], only=None, methods=None
+        )
+        assert {p[0] for p in runner.plan(args)} == {"lego"}, f"{single_scene} measures lego only"
 
 
 def test_an_unknown_setting_is_one_clear_error(tmp_path: Path) -> None:
@@ -140,21 +144,23 @@ def test_a_curve_trains_the_800_iteration_choice_unless_told(tmp_path: Path) -> 
     tensorf = _row("wd0-nodecay", SEEDS[0], val=21.5, test=21.0) | {"method": "tensorf-vm"}
     tensorf["key"] = "lego/tensorf-vm_cpu-800_wd0-nodecay_800_s20211202"
     results.write_text("".join(json.dumps(r) + "\n" for r in [*rows, tensorf]))
-    args = argparse.Namespace(protocol=["cpu-3000"], scene=["lego"], only=None, results=results, methods=None)
-    plan = {(r.method, r.views, r.iters) for *_, r in runner.curve_plan(args)}
+    args = argparse.Namespace(
+        stage="curve", protocol=["cpu-3000"], scene=["lego"], only=None, results=results, methods=None
+    )
+    plan = {(r.method, r.views, r.iters) for *_, r in runner.plan(args)}
     assert plan == {("fourierf-vm", "cpu-3000_wd0", 3000), ("tensorf-vm", "cpu-3000_wd0-nodecay", 3000)}
     args.methods = ["tensorf-vm"]
-    assert {(r.method, r.views) for *_, r in runner.curve_plan(args)} == {("tensorf-vm", "cpu-3000_wd0-nodecay")}
+    assert {(r.method, r.views) for *_, r in runner.plan(args)} == {("tensorf-vm", "cpu-3000_wd0-nodecay")}
     args.methods = None
     args.only = ["wd0-ramp0.5", "preset"]
-    plan = {(r.method, r.views) for *_, r in runner.curve_plan(args)}
+    plan = {(r.method, r.views) for *_, r in runner.plan(args)}
     assert plan == {("fourierf-vm", "cpu-3000_wd0-ramp0.5"), ("fourierf-vm", "cpu-3000_preset"),
                     ("tensorf-vm", "cpu-3000_preset")}  # fmt: skip
     args.only = ["wd0-ramp0.5"]  # curriculum settings alone: tensorf-vm has nothing to run, and that is no error
-    assert {(r.method, r.views) for *_, r in runner.curve_plan(args)} == {("fourierf-vm", "cpu-3000_wd0-ramp0.5")}
+    assert {(r.method, r.views) for *_, r in runner.plan(args)} == {("fourierf-vm", "cpu-3000_wd0-ramp0.5")}
     args.protocol = ["cpu-800"]
     with pytest.raises(SystemExit, match="the curve stage runs"):
-        runner.curve_plan(args)
+        runner.plan(args)
 
 
 def test_the_curve_table_sets_each_step_beside_the_short_run() -> None:
@@ -251,25 +257,37 @@ def test_seeds_run_the_val_choice_on_the_later_seeds(tmp_path: Path) -> None:
     rows = [_row("wd0", SEEDS[0], val=22.0, test=20.0), _row("preset", SEEDS[0], val=21.0, test=23.0)]
     results.write_text("".join(json.dumps(r) + "\n" for r in rows))
     args = argparse.Namespace(
-        protocol=["cpu-800"], scene=["lego"], results=results, methods=["fourierf-vm"], only=None, seeds=None
+        stage="seeds",
+        protocol=["cpu-800"],
+        scene=["lego"],
+        results=results,
+        methods=["fourierf-vm"],
+        only=None,
+        seeds=None,
     )
-    plan = [(r.method, r.views, r.seed) for *_, r in runner.seeds_plan(args)]
+    plan = [(r.method, r.views, r.seed) for *_, r in runner.plan(args)]
     assert plan == [("fourierf-vm", "cpu-800_wd0", seed) for seed in SEEDS[1:]]
     args.methods = None  # tensorf-vm has no sweep row: one clear error
     with pytest.raises(SystemExit, match="no sweep result for lego cpu-800 tensorf-vm"):
-        runner.seeds_plan(args)
+        runner.plan(args)
 
 
 def test_seeds_of_named_settings_skip_what_tensorf_cannot_vary(tmp_path: Path) -> None:
     results = tmp_path / "results.jsonl"
     results.write_text("")
     args = argparse.Namespace(
-        protocol=["cpu-800"], scene=["lego"], results=results, methods=None, only=["wd0-ramp0.5"], seeds=None
+        stage="seeds",
+        protocol=["cpu-800"],
+        scene=["lego"],
+        results=results,
+        methods=None,
+        only=["wd0-ramp0.5"],
+        seeds=None,
     )
-    plan = [(r.method, r.views, r.seed) for *_, r in runner.seeds_plan(args)]
+    plan = [(r.method, r.views, r.seed) for *_, r in runner.plan(args)]
     assert plan == [("fourierf-vm", "cpu-800_wd0-ramp0.5", seed) for seed in SEEDS[1:]]
     args.seeds = [SEEDS[2]]  # one of the later seeds, when a run is long
-    assert [r.seed for *_, r in runner.seeds_plan(args)] == [SEEDS[2]]
+    assert [r.seed for *_, r in runner.plan(args)] == [SEEDS[2]]
 
 
 def test_the_later_seeds_table_holds_gpu_settings_run_on_every_later_seed_beside_their_repeats() -> None:

@@ -28,11 +28,9 @@ from harness import (
     elapsed_by_step,
     eval_report,
     read_jsonl,
-    read_metrics,
-    run_checked,
     seconds_per_iteration,
     section_head,
-    train_cmd,
+    train_run,
     write_jsonl,
     write_section,
 )
@@ -127,15 +125,10 @@ def run_side(
 ) -> dict:
     """Train and evaluate one P-CPU run of ``scene`` with the package in ``code`` and the side's own ``flags``; its
     timings and PSNR."""
-    env = dict(os.environ, PYTHONPATH=str(code))
-    out = work / "runs" / label
-    shutil.rmtree(out, ignore_errors=True)
-    sizes = ["--seed", str(seed), "--max-num-iterations", "800", "--log-every", "50", *GRID_FLAGS]
-    train = train_cmd("fourierf-vm", shared / "data" / SCENES[scene]["data"], out, "run", *sizes,
-                      *SCENES[scene]["flags"], *flags, *SCENES[scene]["parser"],
-                      program=(*MODULE, "fourierf_plugin.scripts.train"))  # fmt: skip
-    wall, _ = run_checked(train, work / f"{label}.train.log", "training", env)
-    run_dir = out / scene / "fourierf-vm" / "run"
+    env, data = dict(os.environ, PYTHONPATH=str(code)), SCENES[scene]
+    sizes = ["--seed", str(seed), "--max-num-iterations", "800", "--log-every", "50", *GRID_FLAGS, *data["flags"]]
+    run_dir, records, wall, _ = train_run(shared / "data" / data["data"], work, label, *sizes, *flags, *data["parser"],
+                                          env=env, program=(*MODULE, "fourierf_plugin.scripts.train"))  # fmt: skip
     lpips = str(shared / "lpips/lpips_alex_v0.1.pth")
     result, _ = eval_report(run_dir, work, label, "--render-dir", "none", "--lpips-weights", lpips, env=env,
                             program=(*MODULE, "fourierf_plugin.scripts.eval"))  # fmt: skip
@@ -143,7 +136,7 @@ def run_side(
         "label": label,
         "seed": seed,
         "train_wall_s": wall,
-        "final_s_per_it": seconds_per_iteration(elapsed_by_step(read_metrics(run_dir / "metrics.jsonl")), *FINAL),
+        "final_s_per_it": seconds_per_iteration(elapsed_by_step(records), *FINAL),
         "render_s": result["timings"]["render_seconds_total"],
         "psnr": result["results"]["psnr"],
     }

@@ -18,13 +18,10 @@ from harness import (
     done_record,
     elapsed_by_step,
     eval_report,
-    read_metrics,
-    run_checked,
-    run_dir_in,
     seconds_per_iteration,
     section_head,
     size_flags,
-    train_cmd,
+    train_run,
     write_jsonl,
     write_section,
 )
@@ -46,11 +43,8 @@ def protocols(shared: Path, tiny: bool) -> dict[str, tuple[Path, list[str]]]:
 
 
 def run(name: str, scene: Path, parser: list[str], args: argparse.Namespace) -> dict:
-    out, device = args.work / "runs" / name, ["--device", args.device]
-    train = train_cmd("fourierf-vm", scene, out, "run", *device, *(TINY if args.tiny else SIZES), *parser)
-    wall, rss = run_checked(train, args.work / f"{name}.train.log", "training")
-    run_dir = run_dir_in(out, "fourierf-vm", "run")
-    records = read_metrics(run_dir / "metrics.jsonl")
+    device = ["--device", args.device]
+    run_dir, records, wall, rss = train_run(scene, args.work, name, *device, *(TINY if args.tiny else SIZES), *parser)
     elapsed, done = elapsed_by_step(records), done_record(records) or {}
     steps = sorted(elapsed)
     tail = [s for s in steps if s >= 0.8 * steps[-1]]

@@ -95,6 +95,19 @@ def run_dir_in(out: Path, method: str, stamp: str) -> Path:
     return next(out.glob(f"*/{method}/{stamp}"))
 
 
+def train_run(
+    data: Path, work: Path, name: str, *flags: str, env: dict[str, str] | None = None, program: Sequence[str] = TRAIN
+) -> tuple[Path, list[dict], float, float]:
+    """Train a fourierf-vm run afresh into ``work/runs/<name>`` (its log ``work/<name>.train.log``): its folder, its
+    metrics records, the wall seconds and the peak RSS (GB)."""
+    out = work / "runs" / name
+    shutil.rmtree(out, ignore_errors=True)
+    cmd = train_cmd("fourierf-vm", data, out, "run", *flags, program=program)
+    wall, rss = run_checked(cmd, work / f"{name}.train.log", "training", env)
+    run_dir = run_dir_in(out, "fourierf-vm", "run")
+    return run_dir, read_metrics(run_dir / "metrics.jsonl"), wall, rss
+
+
 def read_jsonl(path: Path) -> list[dict]:
     """The rows of a JSONL file (none if it is missing)."""
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()] if path.exists() else []

@@ -23,11 +23,9 @@ from harness import (
     elapsed_by_step,
     eval_report,
     read_jsonl,
-    read_metrics,
-    run_checked,
     seconds_per_iteration,
     section_head,
-    train_cmd,
+    train_run,
     write_section,
 )
 
@@ -50,15 +48,12 @@ def reference_run(peer: Path, seed: int, log: Path) -> dict:
 
 def our_run(shared: Path, seed: int, work: Path) -> dict:
     """One run of this project, then every saved checkpoint scored on the test views (after, untimed)."""
-    out, lpips = work / "runs" / f"ours-{seed}", str(shared / "lpips/lpips_alex_v0.1.pth")
+    lpips = str(shared / "lpips/lpips_alex_v0.1.pth")
     flags = [
         "--seed", str(seed), "--max-num-iterations", "800", *GRID_FLAGS, "--steps-per-save", str(EVAL_EVERY),
         "--keep-checkpoints", "0", "--log-every", str(EVAL_EVERY // 2), *OFFICIAL_OPTIMISER, *PCPU_LEGO_PARSER,
     ]  # fmt: skip
-    cmd = train_cmd("fourierf-vm", shared / "data/blender/lego", out, "run", *flags)
-    _, rss = run_checked(cmd, work / f"ours-{seed}.train.log", "training")
-    run_dir = out / "lego" / "fourierf-vm" / "run"
-    records = read_metrics(run_dir / "metrics.jsonl")
+    run_dir, records, _, rss = train_run(shared / "data/blender/lego", work, f"ours-{seed}", *flags)
     elapsed = elapsed_by_step(records)
     curve = {}
     for ckpt in sorted((run_dir / "checkpoints").glob("step-*.ckpt")):

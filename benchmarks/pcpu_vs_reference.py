@@ -7,7 +7,6 @@ time to the reference's final PSNR (ours scored every 10 % of the run, untimed),
 
 from __future__ import annotations
 
-import json
 import os
 import statistics
 import subprocess
@@ -26,15 +25,16 @@ from harness import (
     seconds_per_iteration,
     section_head,
     train_run,
+    write_jsonl,
     write_section,
 )
 
 EVAL_EVERY = 80  # 10 % of the run
 
 
-def reference_run(peer: Path, seed: int, log: Path) -> dict:
-    """One reference run; the fields of its RESULT line as numbers."""
-    env = dict(os.environ, PCPU_OUT=str(log.parent / "peer-runs"))
+def reference_run(peer: Path, seed: int, work: Path) -> dict:
+    """One reference run (its log ``work/reference-SEED.log``); the fields of its RESULT line as numbers."""
+    log, env = work / f"reference-{seed}.log", dict(os.environ, PCPU_OUT=str(work / "peer-runs"))
     proc = subprocess.run(
         ["bash", str(peer / "run_pcpu.sh"), "fourierf", str(seed)], capture_output=True, text=True, env=env
     )
@@ -127,13 +127,11 @@ def main() -> None:
         row: dict = {"seed": seed}
         for side in ("reference", "ours") if i % 2 == 0 else ("ours", "reference"):
             print(f"seed {seed}: {side} ...", flush=True)
-            if side == "reference":
-                row[side] = reference_run(peer, seed, args.work / f"reference-{seed}.log")
-            else:
-                row[side] = our_run(args.shared, seed, args.work)
+            row[side] = (
+                our_run(args.shared, seed, args.work) if side == "ours" else reference_run(peer, seed, args.work)
+            )
         rows.append(row)
-        with results.open("a") as fh:
-            fh.write(json.dumps(row) + "\n")
+        write_jsonl(results, rows)
     write_section(args.markdown, "pcpu-vs-reference", "pcpu_vs_reference.py", section(rows))
 
 

@@ -317,7 +317,7 @@ def lego_side(suite: Suite) -> int:
 
 
 def timed(rows: Sequence[dict], scene: str, method: str) -> list[dict]:
-    """The rows of a method on a scene that trained (not too short), by training time."""
+    """The rows of a method (or variant) on a scene that trained (not too short), by training time."""
     found = [r for r in rows if (r["scene"], r["method"]) == (scene, method) and "too_short" not in r]
     return sorted(found, key=lambda r: r["trained_seconds"])
 
@@ -507,9 +507,8 @@ def figure(rows: Sequence[dict], suite: Suite) -> str:
 
 
 def counted(rows: Sequence[dict], scene: str, method: str) -> list[dict]:
-    """The trained rows of a method (or variant) on a scene, most iterations first."""
-    found = [r for r in rows if (r["scene"], r["method"]) == (scene, method) and "psnr" in r]
-    return sorted(found, key=lambda r: -r["iterations"])
+    """``timed``'s rows of a method (or variant), most iterations first."""
+    return sorted(timed(rows, scene, method), key=lambda r: -r["iterations"])
 
 
 def gap(rows: Sequence[dict], scene: str, ahead: str, behind: str) -> str:

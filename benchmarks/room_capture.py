@@ -100,15 +100,20 @@ def execute(run: Run, room: Path, work: Path, lpips: Path, threads: int | None) 
 
 
 def picture(rows: dict[str, dict], room: Path, work: Path, threads: int | None, path: Path) -> None:
-    """Test views, one row each: the photo, then each method's RGB and depth (``rows``: its 8-view run's row)."""
+    """Test views, one row each: the photo, then each method's RGB and depth (``rows``: its 8-view run's row). A picture
+    already drawn is kept when the recorded runs it shows are not on this machine."""
+    missing = [row["run_dir"] for row in rows.values() if not (Path(row["run_dir"]) / "config.json").is_file()]
+    if missing and path.is_file():
+        print(f"kept {path}: the recorded runs it shows are not on this machine ({', '.join(missing)})")
+        return
+    if missing:
+        sys.exit(
+            f"error: the recorded runs {', '.join(missing)} are not on this machine, so their views cannot be "
+            f"pictured; move {RESULTS} aside to train the runs again"
+        )
     folders = {}
     for method, row in rows.items():
         folders[method] = work / f"{row['key']}_renders"
-        if not (Path(row["run_dir"]) / "config.json").is_file():
-            sys.exit(
-                f"error: the recorded run {row['run_dir']} is not on this machine, so its views cannot be pictured; "
-                f"move {RESULTS} aside to train the runs again"
-            )
         if not folders[method].is_dir():
             cmd = [
                 str(BIN / "fourierf-render"), "dataset", "--load-config", str(Path(row["run_dir"]) / "config.json"),

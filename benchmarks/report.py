@@ -84,15 +84,13 @@ def first_seed_row(results: dict[str, dict], protocol: str, method: str, setting
 
 def mid_along_the_budget(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
     """Fern at mid sizes and `lr0.08`, 800 against 3000 iterations, per method, first seed (mid-800's only one)."""
-    lines = []
-    for m in suite.methods:
-        short, long = (first_seed_row(results, p, m, "lr0.08", suite) for p in ("mid-800", "mid-3000"))
-        if short and long:
-            lines.append(
-                f"- fern, {m}, mid sizes, `lr0.08`, 800 → 3000 iterations: val {short['val_psnr']:.2f} → "
-                f"{long['val_psnr']:.2f}, test {short['psnr']:.2f} → {long['psnr']:.2f}"
-            )
-    return lines
+    runs = {m: [first_seed_row(results, p, m, "lr0.08", suite) for p in ("mid-800", "mid-3000")] for m in suite.methods}
+    return [
+        f"- fern, {m}, mid sizes, `lr0.08`, 800 → 3000 iterations: val {short['val_psnr']:.2f} → "
+        f"{long['val_psnr']:.2f}, test {short['psnr']:.2f} → {long['psnr']:.2f}"
+        for m, (short, long) in runs.items()
+        if short and long
+    ]
 
 
 def rule_along_the_budget(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
@@ -114,15 +112,14 @@ def targets_table(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
     """Each target as measured: both methods' choices, the lead in test PSNR and by how much it is met or missed."""
     lines = []
     for t in suite.targets:
-        picked, rows = {}, {}
+        picked, test = {}, {}
         for method, allowed in ((F, t.get("fourierf", ())), (T, t.get("tensorf", ()))):
             groups = rows_by(results, t["scene"], t["protocol"], method)
             groups = {s: r for s, r in groups.items() if not allowed or s in allowed}
             picked[method] = chosen_setting(groups, suite.seeds)
-            rows[method] = groups.get(picked[method], [])
-        if not all(rows.values()):
+            test[method] = {r["seed"]: r["psnr"] for r in groups.get(picked[method], [])}
+        if not all(test.values()):
             continue
-        test = {m: {r["seed"]: r["psnr"] for r in rows[m]} for m in (F, T)}
         own, baseline = (float(np.mean(list(test[m].values()))) for m in (F, T))
         lead = own - baseline
         shared = [seed for seed in suite.seeds if seed in test[F] and seed in test[T]]
@@ -380,20 +377,19 @@ def scene_tables(rows: Sequence[dict], scene: str, suite: Suite) -> list[str]:
     lines = [
         f"### {scene}",
         "",
-        "Test PSNR / SSIM / LPIPS at each budget (too short: the budget does not fit the method's fewest iterations):",
-        "",
-        *table(["method", *budgets], [md_row([m, *(cell(here.get((m, b))) for b in budgets)]) for m in methods]),
+        *titled_table(
+            "Test PSNR / SSIM / LPIPS at each budget (too short: the budget does not fit the method's fewest "
+            "iterations):",
+            ["method", *budgets],
+            [md_row([m, *(cell(here.get((m, b))) for b in budgets)]) for m in methods],
+        ),
     ]
-    if targets:
-        points = {m: [(r["trained_seconds"], r["psnr"]) for r in timed(rows, scene, m)] for m in methods}
-        times = [md_row([m, *(time_cell(points[m], t) for t in targets)]) for m in methods]
-        lines += [
-            "",
-            "Training time to reach a test PSNR (interpolated on log time between budgets; ≤: reached at the first):",
-            "",
-            *table(["method", *(f"{t:.1f} dB" for t in targets)], times),
-        ]
-    return [*lines, ""]
+    points = {m: [(r["trained_seconds"], r["psnr"]) for r in timed(rows, scene, m)] for m in methods}
+    return lines + titled_table(
+        "Training time to reach a test PSNR (interpolated on log time between budgets; ≤: reached at the first):",
+        ["method", *(f"{t:.1f} dB" for t in targets)],
+        [md_row([m, *(time_cell(points[m], t) for t in targets)]) for m in methods] if targets else [],
+    )
 
 
 def speed_table(rows: Sequence[dict], suite: Suite) -> list[str]:
@@ -403,13 +399,12 @@ def speed_table(rows: Sequence[dict], suite: Suite) -> list[str]:
         md_row([m, *(speed_cell(rows, s, m, baseline) for s in scenes), paper.get(m, "—")])
         for m in methods_of(rows, suite)
     ]
-    return [
+    return titled_table(
         f"Seconds per iteration over {baseline}'s (mean over the budgets that trained; est.: from the trainer's "
         "estimate where no budget fitted), beside the paper's Table 3:",
-        "",
-        *table(["method", *scenes, "paper"], lines),
-        "",
-    ]
+        ["method", *scenes, "paper"],
+        lines,
+    )
 
 
 def equal_time_section(rows: Sequence[dict], suite: Suite) -> list[str]:
@@ -492,12 +487,11 @@ def figure(rows: Sequence[dict], suite: Suite) -> str:
             out.append(f'<text x="{x0 - 6}" y="{y(tick) + 4:.1f}" text-anchor="end">{tick}</text>')
         for i, (m, found) in enumerate(lines.items()):
             if found:
-                xy = " ".join(f"{x(r['trained_seconds']):.1f},{y(r['psnr']):.1f}" for r in found)
+                xy = [(f"{x(r['trained_seconds']):.1f}", f"{y(r['psnr']):.1f}") for r in found]
                 colour = COLOURS[i % len(COLOURS)]
-                out.append(f'<polyline points="{xy}" fill="none" stroke="{colour}" stroke-width="2" '
-                           f'data-method="{escape(m)}" data-scene="{escape(scene)}"/>')  # fmt: skip
-                out += [f'<circle cx="{v.split(",")[0]}" cy="{v.split(",")[1]}" r="3" fill="{colour}"/>'
-                        for v in xy.split()]  # fmt: skip
+                out.append(f'<polyline points="{" ".join(",".join(v) for v in xy)}" fill="none" stroke="{colour}" '
+                           f'stroke-width="2" data-method="{escape(m)}" data-scene="{escape(scene)}"/>')  # fmt: skip
+                out += [f'<circle cx="{cx}" cy="{cy}" r="3" fill="{colour}"/>' for cx, cy in xy]
     for i, m in enumerate(methods):
         y_legend = height + 24 * i
         out.append(f'<line x1="{left}" y1="{y_legend}" x2="{left + 30}" y2="{y_legend}" '

@@ -33,6 +33,7 @@ from harness import (
     run_checked,
     run_dir_in,
     section_head,
+    table,
     train_cmd,
     write_section,
 )
@@ -52,8 +53,7 @@ BUDGET = TrainerConfig.viewer_max_slowdown
 STEADY_FROM = 200
 """First step of the steady-state window: by then the browser has loaded the page (its largest one-off cost)."""
 ARMS = {"plain": None, "browser": ["--viewer-max-slowdown", "0.001"], "viewer": []}
-"""The slowdown's arms: no viewer; the page open in the browser but the viewer drawing (almost) nothing after its first
-picture (the browser's own cost on these cores); the viewer at its default budget."""
+"""The slowdown's arms: no viewer; the browser on a viewer that draws almost nothing; the viewer at its budget."""
 VIEWER_SHARE = re.compile(r"live viewer: .*?([0-9.]+) s of the training's time")
 
 
@@ -195,8 +195,7 @@ def final_on(config: Path, moves: int) -> dict:
 
 # -- (b) slowdown -----------------------------------------------------------------------------------------------------
 def train_with_browser(cmd: list[str], port: int, log: Path) -> float:
-    """Run a ``--viewer`` training with one headless browser, open before it as a user's would be, on its page until
-    it ends; the browser's CPU seconds meanwhile."""
+    """A ``--viewer`` training with a headless browser (opened first, as a user's) on its page; the browser's CPU s."""
     with headless_page(None) as page:
         time.sleep(2.0)  # the browser's own start-up settles
         cpu_before = browser_cpu_seconds()
@@ -234,10 +233,7 @@ def viewer_seconds(log: Path) -> float:
 
 def measure_slowdown(data: Path, work: Path, rounds: int, iters: int) -> dict:
     """Interleaved rounds of the arms, the order rotating; training seconds of each, whole and from ``STEADY_FROM``."""
-    seconds: dict[str, list[float]] = {arm: [] for arm in ARMS}
-    steady: dict[str, list[float]] = {arm: [] for arm in ARMS}
-    browser_cpu: dict[str, list[float]] = {arm: [] for arm in ARMS if ARMS[arm] is not None}
-    own: list[float] = []
+    runs: dict[str, list[dict[str, float]]] = {arm: [] for arm in ARMS}  # per arm, one row a training
     out = work / "ab" / time.strftime("%Y%m%d-%H%M%S")  # this invocation's own runs, never an earlier one's
     names = list(ARMS)
     for i in range(rounds):
@@ -246,32 +242,37 @@ def measure_slowdown(data: Path, work: Path, rounds: int, iters: int) -> dict:
             extra = [] if flags is None else ["--viewer", "True", "--viewer-port", str(port), *flags]
             cmd, log = pcpu_train(data, out, stamp, iters, *extra), work / f"{stamp}.log"
             print(f"training {stamp} ...", flush=True)
+            run: dict[str, float] = {}
             if flags is None:
                 run_checked(cmd, log, "training")
             else:
-                browser_cpu[arm].append(train_with_browser(cmd, port, log))
-            if arm == "viewer":
-                own.append(viewer_seconds(log))
+                run["browser_cpu"] = train_with_browser(cmd, port, log)
             records = read_metrics(run_dir_in(out, "fourierf-vm", stamp) / "metrics.jsonl")
-            seconds[arm].append(float(done_record(records)["train_seconds"]))  # type: ignore[index]
+            run["seconds"] = float(done_record(records)["train_seconds"])  # type: ignore[index]
+            if arm == "viewer":
+                run["own_share"] = viewer_seconds(log) / run["seconds"]
             elapsed = elapsed_by_step(records)
             if STEADY_FROM not in elapsed:
                 raise RuntimeError(f"{stamp}: metrics.jsonl logs no step {STEADY_FROM}; log every 50 steps")
-            steady[arm].append(elapsed[max(elapsed)] - elapsed[STEADY_FROM])
-            print(f"  {seconds[arm][-1]:.1f} s", flush=True)
+            run["steady"] = elapsed[max(elapsed)] - elapsed[STEADY_FROM]
+            runs[arm].append(run)
+            print(f"  {run['seconds']:.1f} s", flush=True)
 
-    def ratio(arm: str, base: str, table: dict[str, list[float]]) -> float:
-        return statistics.median(table[arm]) / statistics.median(table[base]) - 1.0
+    def column(arm: str, key: str) -> list[float]:
+        return [run[key] for run in runs[arm]]
+
+    def ratio(arm: str, base: str, key: str = "seconds") -> float:
+        return statistics.median(column(arm, key)) / statistics.median(column(base, key)) - 1.0
 
     return {
-        "seconds": seconds,
-        "slowdown": ratio("viewer", "plain", seconds),
-        "browser_slowdown": ratio("browser", "plain", seconds),
-        "viewer_over_browser": ratio("viewer", "browser", seconds),
-        "own_share": statistics.median(o / t for o, t in zip(own, seconds["viewer"], strict=True)),
-        "browser_cpu": browser_cpu,
-        "steady_slowdown": ratio("viewer", "plain", steady),
-        "steady_browser_slowdown": ratio("browser", "plain", steady),
+        "seconds": {arm: column(arm, "seconds") for arm in ARMS},
+        "slowdown": ratio("viewer", "plain"),
+        "browser_slowdown": ratio("browser", "plain"),
+        "viewer_over_browser": ratio("viewer", "browser"),
+        "own_share": statistics.median(column("viewer", "own_share")),
+        "browser_cpu": {arm: column(arm, "browser_cpu") for arm in ARMS if ARMS[arm] is not None},
+        "steady_slowdown": ratio("viewer", "plain", "steady"),
+        "steady_browser_slowdown": ratio("browser", "plain", "steady"),
     }
 
 
@@ -330,8 +331,7 @@ def section(latency: dict, final: dict, ab: dict, command: str, iters: int, roun
     missed = f" Moves without a preview within 60 s: {latency['missed']}." if latency["missed"] else ""
     return [
         *section_head("Web viewer: latency and training slowdown", command, settings),
-        "| measure | value | target |",
-        "|---|---|---|",
+        *table(["measure", "value", "target"], []),
         f"| camera move → preview ({', '.join(latency['sizes'])} shown), median (range) of {len(lats)} moves | "
         f"{latency['median']:.2f} s ({min(lats):.2f}–{max(lats):.2f}; {ok_latency} the target) "
         f"| ≤ {LATENCY_TARGET_S} s |",

@@ -57,6 +57,12 @@ GPU_ROWS = [
 SFM_RESULT = {
     "registered": 20, "total": 20, "mean_reprojection_error_px": 0.701, "rotation_deg_median": 0.49,
     "rotation_deg_max": 0.583, "centre_percent_median": 0.38, "centre_percent_max": 0.671, "wall_seconds": 11.2,
+    "training": {
+        "llff-data": {"scene_kind": "forward-facing (llff-data)", "train_view_ids": [1, 10, 19], "psnr": 19.5,
+                      "ssim": 0.61, "lpips": 0.4},
+        "nerfstudio-data": {"scene_kind": "forward-facing", "train_view_ids": [1, 10, 19], "psnr": 19.25,
+                            "ssim": 0.6, "lpips": 0.41},
+    },
 }  # fmt: skip
 
 
@@ -100,6 +106,22 @@ def test_the_gpu_protocol_section() -> None:
 
 def test_the_process_data_fern_section() -> None:
     assert "\n".join(load_benchmark("process_data_fern").section(SFM_RESULT)) + "\n" == golden("process_data_fern")
+
+
+def budget_row(budget: str, budget_s: float, planned: int, run: int, train_s: float) -> dict:
+    return {
+        "budget": budget, "budget_seconds": budget_s, "planned_iterations": planned, "iterations": run,
+        "planned_seconds": budget_s * 0.95, "train_seconds": train_s, "wall_seconds": train_s + 12.0,
+        "within": abs(train_s / budget_s - 1) <= 0.1,
+    }  # fmt: skip
+
+
+def test_the_time_budget_section() -> None:
+    rows = {
+        "lego_tiny": [budget_row("30s", 30.0, 180, 180, 28.4), budget_row("1m", 60.0, 400, 371, 57.2)],
+        "fern, 3 views": [budget_row("3m", 180.0, 900, 812, 154.0)],  # 14 % short: not within
+    }
+    assert "\n".join(load_benchmark("time_budget").section(rows)) + "\n" == golden("time_budget")
 
 
 def test_the_room_capture_section() -> None:

@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from harness import arguments, evaluate, run_checked, run_dir_in, section_head, train_cmd, write_section
+from harness import arguments, evaluate, section_head, train_run, write_section
 
 from fourierf_plugin.data.nerfstudio_writer import capture_from_llff
 from fourierf_plugin.scripts.process_data import main as process_data
@@ -33,9 +33,7 @@ def train_pair(fern: Path, scene: Path, work: Path, lpips: Path) -> dict[str, di
     runs: dict[str, dict] = {}
     for parser, data in (("llff-data", fern), ("nerfstudio-data", scene)):
         views = ["--view-ids", *map(str, runs["llff-data"]["train_view_ids"])] if runs else ["--num-views", str(VIEWS)]
-        cmd = train_cmd("fourierf-vm", data, work / "runs", parser, "--seed", str(SEED), parser, *views)
-        run_checked(cmd, work / f"{parser}.train.log", "training")
-        run_dir = run_dir_in(work / "runs", "fourierf-vm", parser)
+        run_dir, _, _, _ = train_run(data, work, parser, "--seed", str(SEED), parser, *views)
         saved = json.loads((run_dir / "config.json").read_text())["config"]["pipeline"]["datamanager"]["dataparser"]
         runs[parser] = evaluate(run_dir, parser, work, lpips) | {
             "train_view_ids": json.loads((run_dir / "views.json").read_text())["train_view_ids"],

@@ -1,7 +1,5 @@
-"""Interleaved A/B of two versions of fourierf on protocol P-CPU: is the new one as fast as the old one? Each version
-runs from its own export, alternating which side goes first; per side: whole runs, the final phase (steps 601–800),
-in-process iterations at step 700, test renders (medians, new/old) and each run's test PSNR. ``--old-flags`` /
-``--new-flags`` time an option instead, in a section of its own.
+"""Interleaved A/B of two versions of fourierf (each from its own export) on protocol P-CPU: is the new one as fast as
+the old one? ``--old-flags`` / ``--new-flags`` time an option instead, in a section of its own.
 
     python benchmarks/ab_speed.py --old HEAD [--new REV] [--pairs 3] [--scene fern] --describe "what differs"
     python benchmarks/ab_speed.py --old HEAD --new HEAD --new-flags "--pipeline.model.entropy-weight 0.00003"
@@ -16,33 +14,20 @@ import shutil
 import statistics
 import subprocess
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
-from harness import (
-    GRID_FLAGS,
-    OFFICIAL_OPTIMISER,
-    PCPU_LEGO_PARSER,
-    REPO,
-    arguments,
-    elapsed_by_step,
-    eval_report,
-    read_jsonl,
-    seconds_per_iteration,
-    section_head,
-    train_run,
-    write_jsonl,
-    write_section,
-)
+import harness
 
 SOURCES = ("fourierf_plugin", "method_configs", "data/parsers")
 INSTALLED = {"method_configs": "fourierf_plugin/method_configs", "data/parsers": "fourierf_plugin/data/parsers"}
 MODULE = (sys.executable, "-P", "-m")
+SIDES = ("old", "new")
 
 
 SCENES = {  # per scene: its folder under <shared>/data, method flags beyond P-CPU's sizes, parser flags, and its
     # BENCHMARKS.md section's title and marker
-    "lego": {"data": "blender/lego", "flags": OFFICIAL_OPTIMISER, "parser": PCPU_LEGO_PARSER,
+    "lego": {"data": "blender/lego", "flags": harness.OFFICIAL_OPTIMISER, "parser": harness.PCPU_LEGO_PARSER,
              "title": "Speed A/B of a change to a default (lego, interleaved)", "marker": "ab_speed"},
     "fern": {"data": "llff/fern", "flags": [], "parser": ["llff-data", "--num-views", "3"],
              "title": "Speed A/B of a change to a forward-facing default (fern, interleaved)",
@@ -82,14 +67,8 @@ def section_of(scene: str, option: bool) -> tuple[str, str]:
     return SCENES[scene]["title"], SCENES[scene]["marker"]
 
 
-def alternating(rounds: int) -> Iterator[tuple[int, str]]:
-    """(round, side) for ``rounds`` rounds of old and new, alternating which side goes first."""
-    for i in range(rounds):
-        yield from ((i, side) for side in (("old", "new") if i % 2 == 0 else ("new", "old")))
-
-
 def git(*args: str) -> str:
-    return subprocess.run(["git", *args], cwd=REPO, check=True, capture_output=True, text=True).stdout.strip()
+    return subprocess.run(["git", *args], cwd=harness.REPO, check=True, capture_output=True, text=True).stdout.strip()
 
 
 def export_tree(rev: str | None, where: Path) -> Path:
@@ -99,20 +78,19 @@ def export_tree(rev: str | None, where: Path) -> Path:
     where.mkdir(parents=True)
     if rev is None:
         for name in git("ls-files", "--cached", "--others", "--exclude-standard", *SOURCES).split():
-            if (REPO / name).is_file():
+            if (harness.REPO / name).is_file():
                 (where / name).parent.mkdir(parents=True, exist_ok=True)
-                shutil.copy2(REPO / name, where / name)
+                shutil.copy2(harness.REPO / name, where / name)
     else:
-        archive = subprocess.run(["git", "archive", rev, *SOURCES], cwd=REPO, check=True, capture_output=True).stdout
-        subprocess.run(["tar", "-x", "-C", str(where)], input=archive, check=True)
+        archive = subprocess.run(["git", "archive", rev, *SOURCES], cwd=harness.REPO, check=True, capture_output=True)
+        subprocess.run(["tar", "-x", "-C", str(where)], input=archive.stdout, check=True)
     for source, target in INSTALLED.items():
         shutil.move(str(where / source), str(where / target))
     return where
 
 
 def revision_label(rev: str | None) -> str:
-    """What a side ran, for meta.json: ``rev`` with its short commit id, or the working tree on its commit, marked when
-    it held uncommitted changes."""
+    """What a side ran, for meta.json: ``rev`` with its short commit id, or the working tree on its commit."""
     head = git("rev-parse", "--short", rev or "HEAD")
     if rev is not None:
         return rev if rev.startswith(head) else f"{rev} ({head})"
@@ -123,20 +101,20 @@ def revision_label(rev: str | None) -> str:
 def run_side(
     code: Path, label: str, seed: int, work: Path, shared: Path, scene: str, flags: Sequence[str] = ()
 ) -> dict:
-    """Train and evaluate one P-CPU run of ``scene`` with the package in ``code`` and the side's own ``flags``; its
-    timings and PSNR."""
+    """One P-CPU run of ``scene`` with the package in ``code`` and the side's ``flags``: its timings and PSNR."""
     env, data = dict(os.environ, PYTHONPATH=str(code)), SCENES[scene]
-    sizes = ["--seed", str(seed), "--max-num-iterations", "800", "--log-every", "50", *GRID_FLAGS, *data["flags"]]
-    run_dir, records, wall, _ = train_run(shared / "data" / data["data"], work, label, *sizes, *flags, *data["parser"],
-                                          env=env, program=(*MODULE, "fourierf_plugin.scripts.train"))  # fmt: skip
-    lpips = str(shared / "lpips/lpips_alex_v0.1.pth")
-    result, _ = eval_report(run_dir, work, label, "--render-dir", "none", "--lpips-weights", lpips, env=env,
-                            program=(*MODULE, "fourierf_plugin.scripts.eval"))  # fmt: skip
+    sizes = ["--seed", str(seed), "--max-num-iterations", "800", "--log-every", "50", *harness.GRID_FLAGS]
+    run_dir, records, wall, _ = harness.train_run(shared / "data" / data["data"], work, label, *sizes, *data["flags"],
+                                                  *flags, *data["parser"], env=env,
+                                                  program=(*MODULE, "fourierf_plugin.scripts.train"))  # fmt: skip
+    lpips = str(shared / harness.LPIPS)
+    result, _ = harness.eval_report(run_dir, work, label, "--render-dir", "none", "--lpips-weights", lpips, env=env,
+                                    program=(*MODULE, "fourierf_plugin.scripts.eval"))  # fmt: skip
     return {
         "label": label,
         "seed": seed,
         "train_wall_s": wall,
-        "final_s_per_it": seconds_per_iteration(elapsed_by_step(records), *FINAL),
+        "final_s_per_it": harness.seconds_per_iteration(harness.elapsed_by_step(records), *FINAL),
         "render_s": result["timings"]["render_seconds_total"],
         "psnr": result["results"]["psnr"],
     }
@@ -183,7 +161,7 @@ def summary(rows: list[dict], timings: dict[str, list[float]], meta: dict) -> li
         f"{old_it:.4f} | {new_it:.4f} | {new_it / old_it:.2f} |"
     )
     lines.append("")
-    for side in ("old", "new"):
+    for side in SIDES:
         psnrs = [f"{r['psnr']:.2f} (seed {r['seed']})" for r in rows if r["side"] == side]
         lines.append(f"- test PSNR {side}: " + ", ".join(psnrs))
     return lines
@@ -197,12 +175,12 @@ def write_report(work: Path, markdown: Path) -> None:
     timings, meta = (json.loads((work / name).read_text()) for name in ("iterations.json", "meta.json"))
     # a record without a scene is lego's
     title, marker = section_of(meta.get("scene", "lego"), bool(meta.get("old_flags") or meta.get("new_flags")))
-    lines = summary(read_jsonl(work / "results.jsonl"), timings, meta)
-    write_section(markdown, marker, "ab_speed.py", [*section_head(title, meta["command"]), *lines, ""])
+    lines = summary(harness.read_jsonl(work / "results.jsonl"), timings, meta)
+    harness.write_section(markdown, marker, "ab_speed.py", [*harness.section_head(title, meta["command"]), *lines, ""])
 
 
 def main() -> None:
-    ap = arguments(__doc__, None)
+    ap = harness.arguments(__doc__, None)
     ap.add_argument("--old", default="HEAD", help="git revision of the baseline")
     ap.add_argument("--new", default=None, help="git revision to compare (default: the working tree)")
     ap.add_argument("--describe", default="", help="what differs between the sides (it goes into BENCHMARKS.md)")
@@ -218,7 +196,7 @@ def main() -> None:
         flags = {"old": shlex.split(args.old_flags), "new": shlex.split(args.new_flags)}
     except ValueError as err:
         ap.error(f"--old-flags / --new-flags: {err}; quote each side's flags as one shell string")
-    args.work = args.work or REPO / "outputs" / f"bench_{SCENES[args.scene]['marker']}"
+    args.work = args.work or harness.REPO / "outputs" / f"bench_{SCENES[args.scene]['marker']}"
     if args.report:
         return write_report(args.work, args.markdown)
     args.work.mkdir(parents=True, exist_ok=True)
@@ -226,16 +204,16 @@ def main() -> None:
               for side, rev in (("old", args.old), ("new", args.new))}  # fmt: skip
     codes = {"old": export_tree(args.old, args.work / "code-old"), "new": export_tree(args.new, args.work / "code-new")}
     rows, seeds = [], [args.seeds[i % len(args.seeds)] for i in range(args.pairs)]
-    for i, side in alternating(args.pairs):
+    for i, side in harness.interleaved(args.pairs, SIDES):
         row = run_side(codes[side], f"{side}-{i}", seeds[i], args.work, args.shared, args.scene, flags[side])
         rows.append(row | {"side": side})
         print(json.dumps(rows[-1]), flush=True)
-    write_jsonl(args.work / "results.jsonl", rows)
+    harness.write_jsonl(args.work / "results.jsonl", rows)
     # The final phase again, with less noise: 40 iterations at step 700 on each side's own final state (equal seeds
     # train identically), in short processes alternating old, new, old, ...
     first = {side: args.work / "runs" / f"{side}-0" / args.scene / "fourierf-vm" / "run" for side in ("old", "new")}
     timings: dict[str, list[float]] = {"old": [], "new": []}
-    for _, side in alternating(args.iteration_repeats):
+    for _, side in harness.interleaved(args.iteration_repeats, SIDES):
         timings[side].append(time_iterations(codes[side], first[side]))
     (args.work / "iterations.json").write_text(json.dumps(timings))
     meta = {

@@ -11,47 +11,36 @@ import argparse
 import sys
 from pathlib import Path
 
-from harness import (
-    LEGO_VIEWS,
-    REPO,
-    arguments,
-    done_record,
-    elapsed_by_step,
-    eval_report,
-    seconds_per_iteration,
-    section_head,
-    size_flags,
-    train_run,
-    write_jsonl,
-    write_section,
-)
+import harness
 
 PAPER = {"lego": 22.41, "fern": 20.97}
-SIZES = ["--max-num-iterations", "10000", *size_flags(4096, (128, 300))]
-TINY = ["--max-num-iterations", "20", "--log-every", "5", *size_flags(256, (16, 24))]
+SIZES = ["--max-num-iterations", "10000", *harness.size_flags(4096, (128, 300))]
+TINY = ["--max-num-iterations", "20", "--log-every", "5", *harness.size_flags(256, (16, 24))]
 
 
 def protocols(shared: Path, tiny: bool) -> dict[str, tuple[Path, list[str]]]:
     """Scene folder and the flags after it, per protocol."""
     if tiny:
-        return {"lego": (REPO / "demo" / "lego_tiny", [])}
+        return {"lego": (harness.REPO / "demo" / "lego_tiny", [])}
     return {
         "lego": (shared / "data/blender/lego", ["blender-data", "--downscale", "1", "--test-every", "1", "--view-ids",
-                                                *LEGO_VIEWS]),
+                                                *harness.LEGO_VIEWS]),
         "fern": (shared / "data/llff/fern", ["llff-data", "--num-views", "3"]),
     }  # fmt: skip
 
 
 def run(name: str, scene: Path, parser: list[str], args: argparse.Namespace) -> dict:
     device = ["--device", args.device]
-    run_dir, records, wall, rss = train_run(scene, args.work, name, *device, *(TINY if args.tiny else SIZES), *parser)
-    elapsed, done = elapsed_by_step(records), done_record(records) or {}
+    run_dir, records, wall, rss = harness.train_run(
+        scene, args.work, name, *device, *(TINY if args.tiny else SIZES), *parser
+    )
+    elapsed, done = harness.elapsed_by_step(records), harness.done_record(records) or {}
     steps = sorted(elapsed)
     tail = [s for s in steps if s >= 0.8 * steps[-1]]
     tail = tail if len(tail) > 1 else steps[-2:]
-    s_per_it = seconds_per_iteration(elapsed, tail[0], tail[-1]) if len(tail) > 1 else None
+    s_per_it = harness.seconds_per_iteration(elapsed, tail[0], tail[-1]) if len(tail) > 1 else None
     lpips = [] if args.lpips is None else ["--lpips-weights", str(args.lpips)]
-    results = eval_report(run_dir, args.work, name, "--render-dir", "none", *device, *lpips)[0]["results"]
+    results = harness.eval_report(run_dir, args.work, name, "--render-dir", "none", *device, *lpips)[0]["results"]
     return {
         "protocol": name, "device": args.device, "tiny": args.tiny, "train_seconds": done.get("train_seconds"),
         "wall_seconds": wall, "final_s_per_it": s_per_it, "peak_gpu_gb": done.get("peak_device_memory_gb"),
@@ -65,7 +54,7 @@ def section(rows: list[dict]) -> list[str]:
         return "—" if value is None else format(value, fmt)
 
     lines = [
-        *section_head("The paper's protocols on a GPU", "python benchmarks/gpu_protocol.py"),
+        *harness.section_head("The paper's protocols on a GPU", "python benchmarks/gpu_protocol.py"),
         "| protocol | device | train s | final-phase s/it | peak GPU GB | PSNR | paper PSNR | SSIM | LPIPS |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
@@ -79,7 +68,7 @@ def section(rows: list[dict]) -> list[str]:
 
 
 def main() -> None:
-    ap = arguments(__doc__, "bench_gpu_protocol")
+    ap = harness.arguments(__doc__, "bench_gpu_protocol")
     ap.add_argument("--device", default="cuda", choices=["cuda", "cpu", "auto"])
     ap.add_argument("--tiny", action="store_true", help="the bundled scene at toy size (checks the pipeline)")
     ap.add_argument("--lpips", type=Path, default=None, help="LPIPS-alex weights (default: none)")
@@ -91,8 +80,8 @@ def main() -> None:
             sys.exit("error: no CUDA device here; run on a GPU machine (or --tiny --device cpu to check the script)")
     args.work.mkdir(parents=True, exist_ok=True)
     rows = [run(name, scene, parser, args) for name, (scene, parser) in protocols(args.shared, args.tiny).items()]
-    write_jsonl(args.work / "results.jsonl", rows)
-    write_section(args.markdown, "gpu-protocol", "gpu_protocol.py", section(rows))
+    harness.write_jsonl(args.work / "results.jsonl", rows)
+    harness.write_section(args.markdown, "gpu-protocol", "gpu_protocol.py", section(rows))
 
 
 if __name__ == "__main__":

@@ -13,7 +13,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,11 +26,10 @@ from fourierf_plugin.utils.console import CPU_THREADS_NOTE
 BIN = Path(sys.executable).parent
 REPO = Path(__file__).resolve().parents[1]
 TRAIN, EVAL = (str(BIN / "fourierf-train"),), (str(BIN / "fourierf-eval"),)
+LPIPS = "lpips/lpips_alex_v0.1.pth"  # the LPIPS-alex weights, under --shared
 LEGO_VIEWS = ("27", "76", "97", "99")
-PCPU_LEGO_PARSER = ["blender-data", "--downscale", "4", "--test-every", "8", "--view-ids", *LEGO_VIEWS]
-"""P-CPU's lego: 4 views at 100×100, every 8th test view."""
-OFFICIAL_OPTIMISER = ["--optimizer.weight-decay", "0", "--optimizer.lr-decay-ratio", "1.0"]
-"""The official code's optimiser: no weight decay, no learning-rate decay."""
+PCPU_LEGO_PARSER = ["blender-data", "--downscale", "4", "--test-every", "8", "--view-ids", *LEGO_VIEWS]  # 100×100
+OFFICIAL_OPTIMISER = ["--optimizer.weight-decay", "0", "--optimizer.lr-decay-ratio", "1.0"]  # as the official code
 
 
 def size_flags(rays: int, grid: tuple[int, int]) -> list[str]:
@@ -46,8 +45,7 @@ GRID_FLAGS = [*size_flags(1024, (64, 128)), "--steps-per-save", "100000"]
 
 
 def arguments(doc: str | None, work: str | None) -> argparse.ArgumentParser:
-    """A script's parser with the options every script has: ``--shared``, ``--work`` (under outputs/) and
-    ``--markdown`` ('none' writes no section)."""
+    """A script's parser with the options every script has: --shared, --work (under outputs/) and --markdown."""
     ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--shared", type=Path, default=REPO.parent / "shared")
     ap.add_argument("--work", type=Path, default=None if work is None else REPO / "outputs" / work)
@@ -75,6 +73,12 @@ def run_checked(cmd: Sequence[str], log: Path, what: str, env: dict[str, str] | 
     return seconds, rss
 
 
+def interleaved(rounds: int, sides: Sequence[str]) -> Iterator[tuple[int, str]]:
+    """(round, side) for ``rounds`` rounds of ``sides``, the order rotating so that each side goes first in turn."""
+    for i in range(rounds):
+        yield from ((i, side) for side in [*sides[i % len(sides) :], *sides[: i % len(sides)]])
+
+
 def train_cmd(method: str, data: Path, out: Path, stamp: str, *flags: str, program: Sequence[str] = TRAIN) -> list:
     """A ``fourierf-train`` command writing ``out/<scene>/<method>/<stamp>``; later flags win, the parser's last."""
     return [*program, method, "--data", str(data), "--output-dir", str(out), "--timestamp", stamp, *flags]
@@ -98,34 +102,30 @@ def run_dir_in(out: Path, method: str, stamp: str) -> Path:
 def train_run(
     data: Path, work: Path, name: str, *flags: str, env: dict[str, str] | None = None, program: Sequence[str] = TRAIN
 ) -> tuple[Path, list[dict], float, float]:
-    """Train a fourierf-vm run afresh into ``work/runs/<name>`` (its log ``work/<name>.train.log``): its folder, its
-    metrics records, the wall seconds and the peak RSS (GB)."""
+    """A fresh fourierf-vm run in ``work/runs/<name>``: its folder, metrics records, wall seconds and peak RSS (GB)."""
     out = work / "runs" / name
     shutil.rmtree(out, ignore_errors=True)
     cmd = train_cmd("fourierf-vm", data, out, "run", *flags, program=program)
     wall, rss = run_checked(cmd, work / f"{name}.train.log", "training", env)
     run_dir = run_dir_in(out, "fourierf-vm", "run")
-    return run_dir, read_metrics(run_dir / "metrics.jsonl"), wall, rss
+    return run_dir, read_jsonl(run_dir / "metrics.jsonl", torn=True), wall, rss
 
 
-def read_jsonl(path: Path) -> list[dict]:
-    """The rows of a JSONL file (none if it is missing)."""
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()] if path.exists() else []
-
-
-def write_jsonl(path: Path, rows: Iterable[dict]) -> None:
-    path.write_text("".join(json.dumps(row) + "\n" for row in rows))
-
-
-def read_metrics(path: Path) -> list[dict]:
-    """The records of a run's metrics.jsonl (a missing file or a torn last line gives what could be read)."""
-    records = []
-    for line in path.read_text().splitlines() if path.is_file() else []:
+def read_jsonl(path: Path, torn: bool = False) -> list[dict]:
+    """The rows of a JSONL file (none if it is missing); ``torn``: skip lines that do not parse (a run's last line)."""
+    rows = []
+    for line in filter(str.strip, path.read_text().splitlines() if path.exists() else []):
         try:
-            records.append(json.loads(line))
+            rows.append(json.loads(line))
         except json.JSONDecodeError:
-            continue
-    return records
+            if not torn:
+                raise
+    return rows
+
+
+def write_jsonl(path: Path, rows: Iterable[dict], mode: str = "w") -> None:
+    with path.open(mode) as fh:
+        fh.writelines(json.dumps(row) + "\n" for row in rows)
 
 
 def log_records(records: list[dict]) -> list[dict]:
@@ -159,11 +159,9 @@ class Run:
         return f"{self.name or self.method}_{self.views}_{self.budget or self.iters}_s{self.seed}"
 
     def sizes(self) -> list[str]:
-        if self.budget is None:
-            return ["--max-num-iterations", str(self.iters), *GRID_FLAGS]
-        return (
-            ["--max-num-iterations", str(self.iters)] if self.budget.endswith("it") else ["--time-budget", self.budget]
-        )
+        if self.budget is not None and not self.budget.endswith("it"):
+            return ["--time-budget", self.budget]
+        return ["--max-num-iterations", str(self.iters), *(GRID_FLAGS if self.budget is None else [])]
 
 
 def train_and_eval(
@@ -214,7 +212,7 @@ def threads_used(train_log: Path) -> int | None:
 
 def revived_batches(metrics: Path) -> int | None:
     """Batches on which the run revived a dead density field, at its last logged step (None: it cannot revive)."""
-    counts = [r["revived_batches"] for r in log_records(read_metrics(metrics)) if "revived_batches" in r]
+    counts = [r["revived_batches"] for r in log_records(read_jsonl(metrics, torn=True)) if "revived_batches" in r]
     return int(counts[-1]) if counts else None
 
 
@@ -231,8 +229,7 @@ def evaluate(
     checkpoint: Path | None = None,
     threads: int | None = None,
 ) -> dict:
-    """Metrics and timings of a run on one split, at its latest checkpoint or ``checkpoint`` (keys of splits other
-    than test prefixed with the split)."""
+    """Metrics and timings of a run on one split (keys prefixed with the split but for test's), at ``checkpoint``."""
     flags = ["--lpips-weights", str(lpips), "--split", split, *thread_flags(threads)]
     flags += ["--checkpoint", str(checkpoint)] if checkpoint is not None else []
     report, eval_s = eval_report(run_dir, work, key if split == "test" else f"{key}.{split}", *flags)
@@ -286,17 +283,14 @@ def run_all(jobs: Sequence[Job], path: Path, at_once: int = 1, again: str | None
 
 
 def record(path: Path, row: dict, again: str | None = None) -> None:
-    """Append a finished row. Run ``--again``, a recorded key's earlier row first moves to ``repeats.jsonl`` with the
-    note: the results keep one row a key, and nothing recorded is lost."""
+    """Append a finished row; run ``--again``, a recorded key's earlier row moves to ``repeats.jsonl`` with the note."""
     held = load_results(path) if again else {}
     earlier = held.pop(row["key"], None)
     if earlier is not None:
-        with path.with_name(REPEATS).open("a") as fh:
-            fh.write(json.dumps(earlier | {"repeat": again}) + "\n")
+        write_jsonl(path.with_name(REPEATS), [earlier | {"repeat": again}], "a")
         write_jsonl(path.with_suffix(".tmp"), held.values())
         path.with_suffix(".tmp").replace(path)  # atomically
-    with path.open("a") as fh:
-        fh.write(json.dumps(row) + "\n")
+    write_jsonl(path, [row], "a")
 
 
 def load_results(path: Path) -> dict[str, dict]:
@@ -328,25 +322,21 @@ def markers(name: str, script: str) -> tuple[str, str]:
     return f"<!-- {name}:begin (generated by benchmarks/{script}; do not edit) -->", f"<!-- {name}:end -->"
 
 
-def update_benchmarks_md(path: Path, begin: str, end: str, body: list[str]) -> str:
-    """Replace (or append) the section between the markers; returns the section."""
+def write_section(markdown: Path, name: str, script: str, body: list[str]) -> None:
+    """Print a script's section and replace (or append) it in ``markdown`` between its markers (not for 'none')."""
+    print("\n".join(body))
+    if str(markdown).lower() == "none":
+        return
+    begin, end = markers(name, script)
     section = "\n".join([begin, *body, end])
     header = "# Benchmarks\n\nAll numbers below are written by the scripts in `benchmarks/` (never by hand).\n"
-    text = path.read_text() if path.exists() else header
+    text = markdown.read_text() if markdown.exists() else header
     if begin in text and end in text:
         head, rest = text.split(begin, 1)
         text = head + section + rest.split(end, 1)[1]
     else:
         text = text.rstrip("\n") + "\n\n" + section + "\n"
-    path.write_text(text)
-    return section
-
-
-def write_section(markdown: Path, name: str, script: str, body: list[str]) -> None:
-    """Print a script's section and write it into ``markdown`` (not where that is 'none')."""
-    print("\n".join(body))
-    if str(markdown).lower() != "none":
-        update_benchmarks_md(markdown, *markers(name, script), body)
+    markdown.write_text(text)
 
 
 def section_head(title: str, command: str, settings: str | None = None, machine: str | None = None) -> list[str]:
@@ -367,15 +357,12 @@ def machine_description() -> str:
 
 
 def cpu_and_cores() -> str:
-    cpu = platform.processor() or platform.machine()
     try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
+        lines = Path("/proc/cpuinfo").read_text().splitlines()
     except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count()} cores"
+        lines = []
+    models = [line.split(":", 1)[1].strip() for line in lines if line.startswith("model name")]
+    return f"{models[0] if models else platform.processor() or platform.machine()}, {os.cpu_count()} cores"
 
 
 # The suite: methods × scenes × protocols × settings × seeds, read from suite.toml.
@@ -384,8 +371,7 @@ SUITE_FILE = Path(__file__).with_name("suite.toml")
 QUALITY_RESULTS = REPO / "benchmarks" / "results" / "quality" / "results.jsonl"
 EQUAL_TIME_RESULTS = REPO / "benchmarks" / "results" / "equal_time" / "results.jsonl"
 EQUAL_ITERATIONS_RESULTS = REPO / "benchmarks" / "results" / "equal_iterations" / "results.jsonl"
-REPEATS = "repeats.jsonl"
-"""Beside the results: other runs of a key that was run again, each with a ``repeat`` note that says what it was."""
+REPEATS = "repeats.jsonl"  # beside the results: earlier rows of keys run again, each with its ``repeat`` note
 
 
 @dataclass(frozen=True)
@@ -436,7 +422,7 @@ FNM, FNM_FROM = "--pipeline.model.floaters-gradient-scaling", "--pipeline.model.
 L1_INITIAL, L1_REST = "--pipeline.model.l1-weight-initial", "--pipeline.model.l1-weight-rest"
 BACKGROUND = "--pipeline.effects.background"
 OCCUPANCY = "--pipeline.model.occupancy-update-fractions"
-TOKENS: dict[str, list[str]] = {
+TOKENS: dict[str, list[str]] = {  # the tokens of a setting's name that stand for fixed flags
     "preset": [],  # the preset as the trainer builds it (the budget rule off, as for every setting)
     "nodecay": ["--optimizer.lr-decay-ratio", "1.0"],
     "tvconst": ["--pipeline.model.tv-decay-ratio", "1.0"],
@@ -454,7 +440,6 @@ TOKENS: dict[str, list[str]] = {
     "alphamask0.3": [OCCUPANCY, "0.3", "0.5"],  # two, at 30 % and 50 %
     "up0.01": ["--pipeline.model.field.upsample-fractions", "0.01"],  # the final grid from 1 % of the run on
 }
-"""The tokens of a setting's name that stand for fixed flags."""
 VALUED: dict[str, Callable[[str], list[str]]] = {  # a prefix and a number: ``tv4``, ``f0d0.1``
     "wd": lambda v: ["--optimizer.weight-decay", v],
     "lr": lambda v: ["--optimizer.lr-grids", v],
@@ -482,9 +467,7 @@ VALUED: dict[str, Callable[[str], list[str]]] = {  # a prefix and a number: ``tv
     "ent": lambda v: ["--pipeline.model.entropy-weight", v],  # InfoNeRF's ray entropy
     "u": lambda v: ["--pipeline.model.entropy-unseen-rays", v],  # ... on this many unseen rays
 }  # fmt: skip
-"""The tokens that are a prefix and a number."""
-CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "mirror", "zfree")
-"""Settings that only change the curriculum: tensorf-vm (masks off) would repeat its run, so it skips them."""
+CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "mirror", "zfree")  # tensorf-vm (no masks) would repeat its run: skipped
 
 
 def setting_flags(setting: str) -> list[str]:
@@ -522,9 +505,8 @@ def val_by_seed(rows: list[dict], seeds: Sequence[int]) -> dict[int, float]:
 
 
 def chosen_setting(groups: dict[str, list[dict]], seeds: Sequence[int]) -> str | None:
-    """The setting with the best mean validation PSNR over ``seeds`` among those run on every seed (the seeds stage
-    runs the sweep's leaders), else the best validation PSNR of the first seed (the sweep's seed): one seed's val
-    PSNR moves by more than many settings differ, so the best of many single-seed settings is mostly the luckiest."""
+    """The best mean val PSNR over ``seeds`` among settings run on all of them, else the first seed's best: one seed's
+    val PSNR moves by more than many settings differ, so the best single-seed setting is mostly the luckiest."""
     seeded = {s: vals for s, rows in groups.items() if len(vals := val_by_seed(rows, seeds)) == len(seeds)}
     if seeded:
         return max(seeded, key=lambda s: float(np.mean(list(seeded[s].values()))))

@@ -13,21 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from harness import (
-    GRID_FLAGS,
-    OFFICIAL_OPTIMISER,
-    PCPU_LEGO_PARSER,
-    arguments,
-    done_record,
-    elapsed_by_step,
-    eval_report,
-    read_jsonl,
-    seconds_per_iteration,
-    section_head,
-    train_run,
-    write_jsonl,
-    write_section,
-)
+import harness
 
 EVAL_EVERY = 80  # 10 % of the run
 
@@ -48,21 +34,22 @@ def reference_run(peer: Path, seed: int, work: Path) -> dict:
 
 def our_run(shared: Path, seed: int, work: Path) -> dict:
     """One run of this project, then every saved checkpoint scored on the test views (after, untimed)."""
-    lpips = str(shared / "lpips/lpips_alex_v0.1.pth")
+    lpips = str(shared / harness.LPIPS)
     flags = [
-        "--seed", str(seed), "--max-num-iterations", "800", *GRID_FLAGS, "--steps-per-save", str(EVAL_EVERY),
-        "--keep-checkpoints", "0", "--log-every", str(EVAL_EVERY // 2), *OFFICIAL_OPTIMISER, *PCPU_LEGO_PARSER,
+        "--seed", str(seed), "--max-num-iterations", "800", *harness.GRID_FLAGS, "--steps-per-save", str(EVAL_EVERY),
+        "--keep-checkpoints", "0", "--log-every", str(EVAL_EVERY // 2), *harness.OFFICIAL_OPTIMISER,
+        *harness.PCPU_LEGO_PARSER,
     ]  # fmt: skip
-    run_dir, records, _, rss = train_run(shared / "data/blender/lego", work, f"ours-{seed}", *flags)
-    elapsed = elapsed_by_step(records)
+    run_dir, records, _, rss = harness.train_run(shared / "data/blender/lego", work, f"ours-{seed}", *flags)
+    elapsed = harness.elapsed_by_step(records)
     curve = {}
     for ckpt in sorted((run_dir / "checkpoints").glob("step-*.ckpt")):
         step = int(ckpt.stem.split("-")[1])
         flags = ["--checkpoint", str(ckpt), "--render-dir", "none", "--lpips-weights", lpips]
-        curve[step] = eval_report(run_dir, work, f"ours-{seed}.step{step}", *flags)[0]["results"]["psnr"]
+        curve[step] = harness.eval_report(run_dir, work, f"ours-{seed}.step{step}", *flags)[0]["results"]["psnr"]
     return {
-        "train_wall_s": done_record(records)["train_seconds"],  # type: ignore[index]
-        "final_phase_s_per_it": seconds_per_iteration(elapsed, 600, 800),
+        "train_wall_s": harness.done_record(records)["train_seconds"],  # type: ignore[index]
+        "final_phase_s_per_it": harness.seconds_per_iteration(elapsed, 600, 800),
         "test_psnr": curve[800],
         "peak_rss_gb": rss,
         "psnr_curve": curve,
@@ -71,10 +58,9 @@ def our_run(shared: Path, seed: int, work: Path) -> dict:
 
 
 def section(rows: list[dict]) -> list[str]:
-    """Per seed the ratios reference / ours (time to the reference's PSNR, per iteration, per run), PSNRs and peak
-    RSS; then their medians."""
+    """Per seed the ratios reference / ours (time to the reference's PSNR, per iteration, per run); their medians."""
     lines = [
-        *section_head(
+        *harness.section_head(
             "P-CPU against the official code, interleaved in one invocation",
             "python benchmarks/pcpu_vs_reference.py",
             "Both sides: lego 4 views, 100×100, batch 1024, 64³ → 128³, 800 iterations, the official optimiser; "
@@ -114,12 +100,12 @@ def section(rows: list[dict]) -> list[str]:
 
 
 def main() -> None:
-    ap = arguments(__doc__, "bench_pcpu_vs_reference")
+    ap = harness.arguments(__doc__, "bench_pcpu_vs_reference")
     ap.add_argument("--seeds", type=int, nargs="+", default=[20211202, 1, 2])
     args = ap.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
     results, peer = args.work / "results.jsonl", args.shared / "peer"
-    rows = read_jsonl(results)
+    rows = harness.read_jsonl(results)
     todo = [s for s in args.seeds if s not in {r["seed"] for r in rows}]
     if todo and not (peer / "run_pcpu.sh").is_file():
         sys.exit(f"error: {peer} has no run_pcpu.sh; pass --shared PATH_TO_SHARED")
@@ -131,8 +117,8 @@ def main() -> None:
                 our_run(args.shared, seed, args.work) if side == "ours" else reference_run(peer, seed, args.work)
             )
         rows.append(row)
-        write_jsonl(results, rows)
-    write_section(args.markdown, "pcpu-vs-reference", "pcpu_vs_reference.py", section(rows))
+        harness.write_jsonl(results, rows)
+    harness.write_section(args.markdown, "pcpu-vs-reference", "pcpu_vs_reference.py", section(rows))
 
 
 if __name__ == "__main__":

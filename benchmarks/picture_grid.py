@@ -1,5 +1,4 @@
-"""A picture grid of held-out views: ground truth | one run | another run, RGB above depth (one range per view, the
-first run's) and accumulation, to see ghosting and floaters a PSNR does not show.
+"""A picture grid of held-out views (ground truth | each run; RGB, depth, accumulation): what a PSNR does not show.
 
     python benchmarks/picture_grid.py --runs A/config.json B/config.json --labels fourierf-vm tensorf-vm \
         --output docs/fern_grid.png
@@ -22,8 +21,7 @@ from fourierf_plugin.utils.colormaps import colorize_accumulation, colorize_dept
 
 
 def columns(config: Path, split: str, views: int, names: Sequence[str] = ()) -> list[dict]:
-    """The split's views named in ``names`` (else its first ``views``) rendered: rgb, target, depth and accumulation.
-    Names are checked before anything renders (a view takes a minute)."""
+    """The split's views ``names`` (else its first ``views``) rendered, the names checked before a view renders."""
     run = load_run(config, config_registry(), device="cpu")
     split_names = [view.name for view in run.pipeline.datamanager.eval_views(split)]
     missing = [name for name in names if name not in split_names]

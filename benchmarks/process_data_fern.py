@@ -1,7 +1,5 @@
-"""``fourierf-process-data images`` on fern's 20 real images_8 photos: images registered, rotation and camera-centre
-errors after aligning to fern's ``poses_bounds.npy`` by a similarity, and wall time, against their targets; then the
-default fourierf-vm run on 3 views through the processed capture (``nerfstudio-data``) beside the same views through
-``llff-data``: a capture made by process-data must train as well as the scene's own poses.
+"""``fourierf-process-data images`` on fern's 20 photos: registration and pose errors against fern's own poses, then
+the default fourierf-vm run on 3 views through the processed capture beside the same views through fern's poses.
 
     python benchmarks/process_data_fern.py [--shared PATH] [--work outputs/bench_process_data_fern]
 """
@@ -14,8 +12,8 @@ import platform
 import time
 from pathlib import Path
 
+import harness
 import numpy as np
-from harness import arguments, evaluate, section_head, train_run, write_section
 
 from fourierf_plugin.data.nerfstudio_writer import capture_from_llff
 from fourierf_plugin.scripts.process_data import main as process_data
@@ -23,19 +21,17 @@ from fourierf_plugin.sfm.alignment import pose_errors
 
 TARGETS = {"registered": 18, "rotation_deg_median": 1.0, "centre_percent_median": 2.0}
 VIEWS, SEED = 3, 20211202
-TRAIN_TOLERANCE_DB = 0.5
-"""The processed capture's run may trail the scene's own poses by this much test PSNR (pose error, another box)."""
+TRAIN_TOLERANCE_DB = 0.5  # the processed capture's run may trail fern's own poses by this much test PSNR
 
 
 def train_pair(fern: Path, scene: Path, work: Path, lpips: Path) -> dict[str, dict]:
-    """The default fourierf-vm run on the same 3 views through llff-data (fern's poses) and nerfstudio-data (the
-    processed capture), each evaluated on its every-8th test views: metrics, views and the scene kind it printed."""
+    """The default run on the same views through fern's poses and the processed capture: metrics, views, scene kind."""
     runs: dict[str, dict] = {}
     for parser, data in (("llff-data", fern), ("nerfstudio-data", scene)):
         views = ["--view-ids", *map(str, runs["llff-data"]["train_view_ids"])] if runs else ["--num-views", str(VIEWS)]
-        run_dir, _, _, _ = train_run(data, work, parser, "--seed", str(SEED), parser, *views)
+        run_dir, _, _, _ = harness.train_run(data, work, parser, "--seed", str(SEED), parser, *views)
         saved = json.loads((run_dir / "config.json").read_text())["config"]["pipeline"]["datamanager"]["dataparser"]
-        runs[parser] = evaluate(run_dir, parser, work, lpips) | {
+        runs[parser] = harness.evaluate(run_dir, parser, work, lpips) | {
             "train_view_ids": json.loads((run_dir / "views.json").read_text())["train_view_ids"],
             "scene_kind": saved.get("scene_kind", "forward-facing (llff-data)"),
         }
@@ -45,7 +41,7 @@ def train_pair(fern: Path, scene: Path, work: Path, lpips: Path) -> dict[str, di
 def section(result: dict) -> list[str]:
     r = result
     return [
-        *section_head(
+        *harness.section_head(
             "Structure from motion on fern's 20 photos (fourierf-process-data images)",
             "python benchmarks/process_data_fern.py",
             "COLMAP's SIFT, exhaustive matching and incremental mapping through pycolmap on the CPU, on fern's "
@@ -73,7 +69,7 @@ def section(result: dict) -> list[str]:
 
 
 def main() -> dict:
-    args = arguments(__doc__, "bench_process_data_fern").parse_args()
+    args = harness.arguments(__doc__, "bench_process_data_fern").parse_args()
     fern, scene = args.shared / "data" / "llff" / "fern", args.work / "scene"
     started = time.perf_counter()
     report = process_data(["images", "--data", str(fern / "images_8"), "--output-dir", str(scene), "--overwrite"])
@@ -99,15 +95,14 @@ def main() -> dict:
     result["passed"] = {
         key: result[key] >= target if key == "registered" else result[key] <= target for key, target in TARGETS.items()
     }
-    result["training"] = train_pair(fern, scene, args.work, args.shared / "lpips" / "lpips_alex_v0.1.pth")
+    result["training"] = train_pair(fern, scene, args.work, args.shared / harness.LPIPS)
     trail = result["training"]["llff-data"]["psnr"] - result["training"]["nerfstudio-data"]["psnr"]
     result["passed"]["training"] = trail <= TRAIN_TOLERANCE_DB
     print(f"training: process-data's capture trails fern's poses by {trail:.2f} dB (at most {TRAIN_TOLERANCE_DB})")
     (args.work / "result.json").write_text(json.dumps(result, indent=2))
     for key in TARGETS:
-        passed = result["passed"][key]
-        print(f"{key}: {result[key]:.3f} (target {TARGETS[key]}) {'ok' if passed else 'MISSED'}")
-    write_section(args.markdown, "process-data-fern", "process_data_fern.py", section(result))
+        print(f"{key}: {result[key]:.3f} (target {TARGETS[key]}) {'ok' if result['passed'][key] else 'MISSED'}")
+    harness.write_section(args.markdown, "process-data-fern", "process_data_fern.py", section(result))
     return result
 
 

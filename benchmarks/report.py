@@ -12,36 +12,17 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from xml.sax.saxutils import escape
 
+import harness
 import numpy as np
-from harness import (
-    EQUAL_ITERATIONS_RESULTS,
-    EQUAL_TIME_RESULTS,
-    QUALITY_RESULTS,
-    REPEATS,
-    REPO,
-    Suite,
-    chosen_setting,
-    fmt,
-    load_results,
-    load_suite,
-    md_row,
-    read_jsonl,
-    rows_by,
-    section_head,
-    table,
-    titled_table,
-    val_by_seed,
-    write_section,
-)
 
-SUITE = load_suite()
+SUITE = harness.load_suite()
 F, T = "fourierf-vm", "tensorf-vm"
 
 
 # -- few-shot quality: each method at its own val-chosen setting per scene and protocol ----------------------------
 def val_cell(rows: list[dict], seeds: Sequence[int]) -> str:
     """A setting's val PSNR: the first seed's, and the mean over the seeds run (named where not all were)."""
-    vals = val_by_seed(rows, seeds)
+    vals = harness.val_by_seed(rows, seeds)
     first = f"{vals[seeds[0]]:.2f}" if seeds[0] in vals else "—"
     mean = float(np.mean(list(vals.values()))) if vals else 0.0
     if len(vals) == len(seeds):
@@ -51,7 +32,7 @@ def val_cell(rows: list[dict], seeds: Sequence[int]) -> str:
     return first
 
 
-def curve_table(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
+def curve_table(results: dict[str, dict], suite: harness.Suite = SUITE) -> list[str]:
     """Val and test PSNR along each curve run, next to the 800-iteration run of its setting (the rule's at 800)."""
     pairs = {(m, r["at_3000"]): r["at_800"] for m, r in suite.rule_along_the_budget.items()}
     pairs[(F, "lr0.08-tvconst-ramp0.2667-tv4")] = "lr0.08-tvconst-tv4"  # the band open by step 800 of 3000
@@ -59,7 +40,7 @@ def curve_table(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
     for r in sorted(results.values(), key=lambda r: r["key"]):
         if "curve" not in r:
             continue
-        groups = rows_by(results, r["scene"], suite.protocols[r["protocol"]].curve_of, r["method"])
+        groups = harness.rows_by(results, r["scene"], suite.protocols[r["protocol"]].curve_of, r["method"])
         setting = r["setting"] if r["setting"] in groups else pairs.get((r["method"], r["setting"]), "")
         short = [x for x in groups.get(setting, []) if x["seed"] == r["seed"]]
         steps = " · ".join(f"{int(step)}: {val:.2f} / {test:.2f}" for step, val, test in r["curve"])
@@ -67,7 +48,7 @@ def curve_table(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
         if short and setting != r["setting"]:
             against += f" (`{setting}`)"
         lines.append(f"| {r['scene']} | {r['method']} | `{r['setting']}` | {against} | {steps} |")
-    return titled_table(
+    return harness.titled_table(
         "Along the budget (`run.py curve`): one run of 3000 iterations, its checkpoints every "
         f"{suite.curve_every} iterations evaluated on val and test, against a run of 800 iterations with the same "
         "sizes and setting (its schedules are fractions of its own length, so step 800 of the long run is not the "
@@ -77,14 +58,17 @@ def curve_table(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
     )
 
 
-def first_seed_row(results: dict[str, dict], protocol: str, method: str, setting: str, suite: Suite) -> dict | None:
-    rows = [r for r in rows_by(results, "fern", protocol, method).get(setting, []) if r["seed"] == suite.seeds[0]]
-    return rows[0] if rows else None
+def first_seed_row(results: dict[str, dict], protocol: str, method: str, setting: str, seed: int) -> dict | None:
+    rows = harness.rows_by(results, "fern", protocol, method).get(setting, [])
+    return next((r for r in rows if r["seed"] == seed), None)
 
 
-def mid_along_the_budget(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
+def mid_along_the_budget(results: dict[str, dict], suite: harness.Suite = SUITE) -> list[str]:
     """Fern at mid sizes and `lr0.08`, 800 against 3000 iterations, per method, first seed (mid-800's only one)."""
-    runs = {m: [first_seed_row(results, p, m, "lr0.08", suite) for p in ("mid-800", "mid-3000")] for m in suite.methods}
+    runs = {
+        m: [first_seed_row(results, p, m, "lr0.08", suite.seeds[0]) for p in ("mid-800", "mid-3000")]
+        for m in suite.methods
+    }
     return [
         f"- fern, {m}, mid sizes, `lr0.08`, 800 → 3000 iterations: val {short['val_psnr']:.2f} → "
         f"{long['val_psnr']:.2f}, test {short['psnr']:.2f} → {long['psnr']:.2f}"
@@ -93,12 +77,12 @@ def mid_along_the_budget(results: dict[str, dict], suite: Suite = SUITE) -> list
     ]
 
 
-def rule_along_the_budget(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
+def rule_along_the_budget(results: dict[str, dict], suite: harness.Suite = SUITE) -> list[str]:
     """Does a user's run under the budget rule get better as the budget grows from 800 to 3000 iterations?"""
     lines = []
     for method, rule in suite.rule_along_the_budget.items():
-        a = first_seed_row(results, "cpu-800", method, rule["at_800"], suite)
-        b = first_seed_row(results, "cpu-3000", method, rule["at_3000"], suite)
+        a = first_seed_row(results, "cpu-800", method, rule["at_800"], suite.seeds[0])
+        b = first_seed_row(results, "cpu-3000", method, rule["at_3000"], suite.seeds[0])
         if a and b:
             lines.append(
                 f"- fern, {method}, the budget rule's settings at cpu sizes: `{rule['at_800']}` at 800 iterations val "
@@ -108,15 +92,15 @@ def rule_along_the_budget(results: dict[str, dict], suite: Suite = SUITE) -> lis
     return lines
 
 
-def targets_table(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
+def targets_table(results: dict[str, dict], suite: harness.Suite = SUITE) -> list[str]:
     """Each target as measured: both methods' choices, the lead in test PSNR and by how much it is met or missed."""
     lines = []
     for t in suite.targets:
         picked, test = {}, {}
         for method, allowed in ((F, t.get("fourierf", ())), (T, t.get("tensorf", ()))):
-            groups = rows_by(results, t["scene"], t["protocol"], method)
+            groups = harness.rows_by(results, t["scene"], t["protocol"], method)
             groups = {s: r for s, r in groups.items() if not allowed or s in allowed}
-            picked[method] = chosen_setting(groups, suite.seeds)
+            picked[method] = harness.chosen_setting(groups, suite.seeds)
             test[method] = {r["seed"]: r["psnr"] for r in groups.get(picked[method], [])}
         if not all(test.values()):
             continue
@@ -129,13 +113,13 @@ def targets_table(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
         if floor is not None and own < floor:
             short.append(f"PSNR by {floor - own:.2f}")
         at_least = f"≥ {floor:.1f} dB and " if floor is not None else ""
-        cells = [f"`{picked[m]}`, {fmt(list(test[m].values()), 2)} ({len(test[m])})" for m in (F, T)]
+        cells = [f"`{picked[m]}`, {harness.fmt(list(test[m].values()), 2)} ({len(test[m])})" for m in (F, T)]
         status = "missed: " + ", ".join(short) if short else "met"
         lines.append(
             f"| {t['scene']}, {t['protocol']}: fourierf-vm {at_least}≥ +{t['lead']:.1f} dB; {t['against']} | "
             f"{cells[0]} | {cells[1]} | **{lead:+.2f}** ({per_seed}) | {status} |"
         )
-    return titled_table(
+    return harness.titled_table(
         "The quality targets, measured (test PSNR, mean ± std over the seeds; the lead per seed in brackets, seeds "
         f"{', '.join(map(str, suite.seeds))}; each choice made on val among the settings the baseline allows):",
         ["target", *(f"{m}: setting, test PSNR (seeds)" for m in (F, T)), "lead", "status"],
@@ -143,7 +127,7 @@ def targets_table(results: dict[str, dict], suite: Suite = SUITE) -> list[str]:
     )
 
 
-def later_seeds_table(results: dict[str, dict], repeats: Sequence[dict], suite: Suite = SUITE) -> list[str]:
+def later_seeds_table(results: dict[str, dict], repeats: Sequence[dict], suite: harness.Suite = SUITE) -> list[str]:
     """Every setting run on each later seed on a GPU, beside its repeats (GPU training is not bit-reproducible)."""
     later = suite.seeds[1:]
     groups: dict[tuple[str, str, str, str, str], dict[int, dict]] = {}
@@ -162,7 +146,7 @@ def later_seeds_table(results: dict[str, dict], repeats: Sequence[dict], suite: 
             f"| {scene} | {protocol} | {method} | `{setting}`{f' ({note})' if note else ''} | {cells} "
             f"| {val:.2f} / {test:.2f} |"
         )
-    return titled_table(
+    return harness.titled_table(
         f"Settings run on seeds {', '.join(map(str, later))} on a GPU (an H100, several runs at once), beside "
         "their other runs: `-plain` is TensoRF's ReLU for the density, `-revive1` revives every dark batch (the "
         "budget rule's for a forward-facing run over 800 iterations), no suffix the field's default, which revives "
@@ -193,7 +177,7 @@ def cpu_reruns_table(results: dict[str, dict], repeats: Sequence[dict]) -> list[
             f"| {kept['scene']} | {kept['protocol']} | {kept['method']} | `{kept['setting']}` | "
             f"{kept['seed']} | {cells[0]} | {cells[1]} | {other['repeat']} |"
         )
-    return titled_table(
+    return harness.titled_table(
         "CPU runs of one setting and seed run twice: the row the tables above read and the other run (`repeats.jsonl`"
         "), val / test PSNR (CPU threads; ? = not recorded). Only a one-thread CPU run is bit-reproducible.",
         ["scene", "protocol", "method", "setting", "seed", "read above", "other run", "what the other run was"],
@@ -218,10 +202,10 @@ def recording_machines(rows: Iterable[dict]) -> str:
     return f"several machines (2-core CPUs, torch 2.13.0+cpu; an H100 where the device is cuda){those}"
 
 
-def quality_section(results: dict[str, dict], repeats: Sequence[dict], suite: Suite = SUITE) -> list[str]:
+def quality_section(results: dict[str, dict], repeats: Sequence[dict], suite: harness.Suite = SUITE) -> list[str]:
     seeds = suite.seeds
     views = "; ".join(f"{scene}: {s['views']}" for scene, s in suite.scenes.items())
-    body = section_head(
+    body = harness.section_head(
         "Few-shot quality: fourierf-vm against tensorf-vm, settings chosen on val",
         "python benchmarks/run.py sweep|seeds|curve, then python benchmarks/report.py",
         "Protocols, scenes and settings: `benchmarks/suite.toml` (a protocol is named by its sizes and iterations: "
@@ -241,19 +225,19 @@ def quality_section(results: dict[str, dict], repeats: Sequence[dict], suite: Su
         + " |"
         for p in suite.protocols.values()
     ]
-    body += [*table(["protocol", "iterations", "rays", "grid", "lego image", "fern image"], protocols), ""]
+    body += [*harness.table(["protocol", "iterations", "rays", "grid", "lego image", "fern image"], protocols), ""]
     summary: list[str] = []
     sweeps: list[str] = []
     for scene in suite.settings:
         for p in suite.protocols:
-            tables = {m: rows_by(results, scene, p, m) for m in (F, T)}
+            tables = {m: harness.rows_by(results, scene, p, m) for m in (F, T)}
             if not all(tables.values()):
                 continue
-            picked = {m: chosen_setting(tables[m], seeds) for m in (F, T)}
+            picked = {m: harness.chosen_setting(tables[m], seeds) for m in (F, T)}
             rows = {m: tables[m][picked[m]] for m in (F, T)}
             test = {m: [r["psnr"] for r in rows[m]] for m in (F, T)}
             device = "/".join(sorted({r["device"] for m in (F, T) for r in rows[m]}))
-            cells = [f"`{picked[m]}`, {fmt(test[m], 2)} ({len(test[m])})" for m in (F, T)]
+            cells = [f"`{picked[m]}`, {harness.fmt(test[m], 2)} ({len(test[m])})" for m in (F, T)]
             gap = np.mean(test[F]) - np.mean(test[T])
             summary.append(
                 f"| {scene} | {p} | {device} | {cells[0]} | {cells[1]} | **{gap:+.2f}** | "
@@ -264,7 +248,8 @@ def quality_section(results: dict[str, dict], repeats: Sequence[dict], suite: Su
                 if vals != ["—", "—"]:
                     sweeps.append(f"| {scene} | {p} | {s} | " + " | ".join(vals) + " |")
     picks = [f"{m}: setting, test PSNR (seeds)" for m in (F, T)]
-    body += [*table(["scene", "protocol", "device", *picks, "gap", "CPU threads", "train s (f / t)"], summary), ""]
+    head = ["scene", "protocol", "device", *picks, "gap", "CPU threads", "train s (f / t)"]
+    body += [*harness.table(head, summary), ""]
     body += targets_table(results, suite)
     body += mid_along_the_budget(results, suite)
     body += rule_along_the_budget(results, suite)
@@ -276,11 +261,11 @@ def quality_section(results: dict[str, dict], repeats: Sequence[dict], suite: Su
         "they were run, or over the seeds named where only some were (the choice above is the best all-seed mean of "
         "each column, else its best first seed):",
         "",
-        *table(["scene", "protocol", "setting", f"{F} val", f"{T} val"], sweeps),
+        *harness.table(["scene", "protocol", "setting", f"{F} val", f"{T} val"], sweeps),
         "",
     ]
     for grid in suite.grids:
-        if (REPO / grid["path"]).is_file():
+        if (harness.REPO / grid["path"]).is_file():
             columns = ", ".join(("ground truth", *grid["columns"]))
             body += [
                 f"{grid['heading']}: `{grid['path']}` (`python benchmarks/picture_grid.py`, {grid['runs']}; "
@@ -306,10 +291,10 @@ COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#1
 def stage_head(rows: Sequence[dict], title: str, command: str, settings: str) -> list[str]:
     """An equal-time or equal-iterations section's opening lines, naming the machines its rows ran on."""
     machines = "; ".join(sorted({r["machine"] for r in rows})) or "none yet"
-    return section_head(title, command, settings, machine=f"{machines}, one thread a run")
+    return harness.section_head(title, command, settings, machine=f"{machines}, one thread a run")
 
 
-def lego_side(suite: Suite) -> int:
+def lego_side(suite: harness.Suite) -> int:
     return 400 // suite.protocols[suite.equal_time["protocol"]].lego_downscale
 
 
@@ -320,8 +305,7 @@ def timed(rows: Sequence[dict], scene: str, method: str) -> list[dict]:
 
 
 def time_to_psnr(points: Sequence[tuple[float, float]], target: float) -> tuple[float, bool] | None:
-    """Seconds to reach ``target`` PSNR along (seconds, PSNR) points sorted by time, linear in log time; (the first
-    point's time, True) where that one already reaches it (an upper bound), None where none does."""
+    """(Seconds, whether an upper bound) to reach ``target`` along (seconds, PSNR) points, linear in log time."""
     for i, (seconds, psnr) in enumerate(points):
         if psnr < target:
             continue
@@ -357,13 +341,13 @@ def speed_cell(rows: Sequence[dict], scene: str, method: str, baseline: str) -> 
     return f"{means[0][0] / means[1][0]:.2f}" + (" (est.)" if means[0][1] or means[1][1] else "")
 
 
-def methods_of(rows: Sequence[dict], suite: Suite) -> list[str]:
+def methods_of(rows: Sequence[dict], suite: harness.Suite) -> list[str]:
     """The suite's methods that have rows, in the suite's order, then any others the rows hold."""
     listed = [m for m in suite.equal_time["methods"] if any(r["method"] == m for r in rows)]
     return listed + sorted({r["method"] for r in rows} - set(listed))
 
 
-def scene_tables(rows: Sequence[dict], scene: str, suite: Suite) -> list[str]:
+def scene_tables(rows: Sequence[dict], scene: str, suite: harness.Suite) -> list[str]:
     here = {(r["method"], r["budget"]): r for r in rows if r["scene"] == scene}
     seconds = {budget: r["budget_seconds"] for (_, budget), r in here.items()}
     budgets, methods = sorted(seconds, key=seconds.__getitem__), methods_of(list(here.values()), suite)
@@ -377,29 +361,29 @@ def scene_tables(rows: Sequence[dict], scene: str, suite: Suite) -> list[str]:
     lines = [
         f"### {scene}",
         "",
-        *titled_table(
+        *harness.titled_table(
             "Test PSNR / SSIM / LPIPS at each budget (too short: the budget does not fit the method's fewest "
             "iterations):",
             ["method", *budgets],
-            [md_row([m, *(cell(here.get((m, b))) for b in budgets)]) for m in methods],
+            [harness.md_row([m, *(cell(here.get((m, b))) for b in budgets)]) for m in methods],
         ),
     ]
     points = {m: [(r["trained_seconds"], r["psnr"]) for r in timed(rows, scene, m)] for m in methods}
-    return lines + titled_table(
+    return lines + harness.titled_table(
         "Training time to reach a test PSNR (interpolated on log time between budgets; ≤: reached at the first):",
         ["method", *(f"{t:.1f} dB" for t in targets)],
-        [md_row([m, *(time_cell(points[m], t) for t in targets)]) for m in methods] if targets else [],
+        [harness.md_row([m, *(time_cell(points[m], t) for t in targets)]) for m in methods] if targets else [],
     )
 
 
-def speed_table(rows: Sequence[dict], suite: Suite) -> list[str]:
+def speed_table(rows: Sequence[dict], suite: harness.Suite) -> list[str]:
     baseline, paper = suite.equal_time["baseline"], suite.equal_time["paper_time_ratio"]
     scenes = [s for s in suite.equal_time["scenes"] if any(r["scene"] == s for r in rows)]
     lines = [
-        md_row([m, *(speed_cell(rows, s, m, baseline) for s in scenes), paper.get(m, "—")])
+        harness.md_row([m, *(speed_cell(rows, s, m, baseline) for s in scenes), paper.get(m, "—")])
         for m in methods_of(rows, suite)
     ]
-    return titled_table(
+    return harness.titled_table(
         f"Seconds per iteration over {baseline}'s (mean over the budgets that trained; est.: from the trainer's "
         "estimate where no budget fitted), beside the paper's Table 3:",
         ["method", *scenes, "paper"],
@@ -407,7 +391,7 @@ def speed_table(rows: Sequence[dict], suite: Suite) -> list[str]:
     )
 
 
-def equal_time_section(rows: Sequence[dict], suite: Suite) -> list[str]:
+def equal_time_section(rows: Sequence[dict], suite: harness.Suite) -> list[str]:
     side = lego_side(suite)
     body = stage_head(
         rows,
@@ -449,7 +433,7 @@ def equal_time_section(rows: Sequence[dict], suite: Suite) -> list[str]:
     ]
 
 
-def figure(rows: Sequence[dict], suite: Suite) -> str:
+def figure(rows: Sequence[dict], suite: harness.Suite) -> str:
     """Test PSNR against training time (log axis), one panel a scene, one polyline a method with trained points."""
     scenes, methods = list(suite.equal_time["scenes"]), methods_of(rows, suite)
     width, height, left, top, plot_w, plot_h = 460, 330, 60, 30, 370, 240
@@ -516,7 +500,7 @@ def gap(rows: Sequence[dict], scene: str, ahead: str, behind: str) -> str:
 
 def iterations_table(rows: Sequence[dict], scene: str, methods: Sequence[str]) -> list[str]:
     head = ["method", "test PSNR", "SSIM", "LPIPS", "iterations", "training s", "s/iteration"]
-    lines = [f"### {scene}", "", *table(head, [])]
+    lines = [f"### {scene}", "", *harness.table(head, [])]
     for method in methods:
         lines += [
             f"| {method} | {row['psnr']:.2f} | {row['ssim']:.3f} | {row['lpips']:.3f} | {row['iterations']} | "
@@ -526,7 +510,7 @@ def iterations_table(rows: Sequence[dict], scene: str, methods: Sequence[str]) -
     return [*lines, ""]
 
 
-def derived_lines(rows: Sequence[dict], suite: Suite) -> list[str]:
+def derived_lines(rows: Sequence[dict], suite: harness.Suite) -> list[str]:
     """FourieRF (paper) over TensoRF (published) on each scene beside the paper's gap; ZeroRF's alpha term on lego."""
     paper_gap = suite.equal_time["iterations"]["paper_gap"]
     gaps = [
@@ -540,7 +524,7 @@ def derived_lines(rows: Sequence[dict], suite: Suite) -> list[str]:
     ]
 
 
-def equal_iterations_section(rows: Sequence[dict], suite: Suite) -> list[str]:
+def equal_iterations_section(rows: Sequence[dict], suite: harness.Suite) -> list[str]:
     stage, side = suite.equal_time["iterations"], lego_side(suite)
     body = stage_head(
         rows,
@@ -567,19 +551,20 @@ def equal_iterations_section(rows: Sequence[dict], suite: Suite) -> list[str]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--results", type=Path, default=QUALITY_RESULTS, help="the rows run.py recorded")
-    ap.add_argument("--equal-time", type=Path, default=EQUAL_TIME_RESULTS, help="the equal-time stage's rows")
-    ap.add_argument("--equal-iterations", type=Path, default=EQUAL_ITERATIONS_RESULTS, help="that stage's rows")
-    ap.add_argument("--markdown", type=Path, default=REPO / "BENCHMARKS.md")
-    ap.add_argument("--figure", type=Path, default=REPO / FIGURE, help="the equal-time figure (SVG)")
+    ap.add_argument("--results", type=Path, default=harness.QUALITY_RESULTS, help="the rows run.py recorded")
+    ap.add_argument("--equal-time", type=Path, default=harness.EQUAL_TIME_RESULTS, help="the equal-time stage's rows")
+    ap.add_argument("--equal-iterations", type=Path, default=harness.EQUAL_ITERATIONS_RESULTS, help="that stage's rows")
+    ap.add_argument("--markdown", type=Path, default=harness.REPO / "BENCHMARKS.md")
+    ap.add_argument("--figure", type=Path, default=harness.REPO / FIGURE, help="the equal-time figure (SVG)")
     args = ap.parse_args()
-    timed_rows, counted_rows = (list(load_results(p).values()) for p in (args.equal_time, args.equal_iterations))
+    timed_rows, counted_rows = ([*harness.load_results(p).values()] for p in (args.equal_time, args.equal_iterations))
+    repeats = harness.read_jsonl(args.results.with_name(harness.REPEATS))
     for name, body in (
-        ("quality", quality_section(load_results(args.results), read_jsonl(args.results.with_name(REPEATS)))),
+        ("quality", quality_section(harness.load_results(args.results), repeats)),
         ("equal-time", equal_time_section(timed_rows, SUITE)),
         ("equal-iterations", equal_iterations_section(counted_rows, SUITE)),
     ):
-        write_section(args.markdown, name, "report.py", body)
+        harness.write_section(args.markdown, name, "report.py", body)
     args.figure.write_text(figure(timed_rows, SUITE))
 
 

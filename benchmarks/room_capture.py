@@ -12,41 +12,22 @@ import sys
 from functools import partial
 from pathlib import Path
 
+import harness
 import imageio.v3 as iio
 import numpy as np
 import trimesh
-from harness import (
-    BIN,
-    REPO,
-    Job,
-    Run,
-    arguments,
-    done_record,
-    evaluate,
-    load_results,
-    read_metrics,
-    run_all,
-    run_checked,
-    run_timed,
-    section_head,
-    thread_flags,
-    train_cmd,
-    write_section,
-)
 
 from fourierf_plugin.method_configs.sizing import CPU_ITERATIONS
 from fourierf_plugin.utils.geometry import chamfer_distance, mesh_surface_points
 
 METHODS = ("fourierf-vm", "tensorf-vm")
 VIEWS = ("8", "all")
-FEW_SHOT_COUNT = CPU_ITERATIONS
-"""Every photo is also trained at the few-shot count, beside the count the trainer sizes for a dense capture."""
-TARGETS = {"8": 22.0, "all": 28.0}
-"""Test PSNR each view count should reach."""
-CROP_PADDING = 0.1
-"""The mesh is scored inside the true object's box grown by this share of its size on each side."""
+FEW_SHOT_COUNT = CPU_ITERATIONS  # every photo is also trained at the few-shot count, beside the trainer's own
+TARGETS = {"8": 22.0, "all": 28.0}  # test PSNR each view count should reach
+CROP_PADDING = 0.1  # the mesh is scored inside the true object's box grown by this share of its size on each side
 PICTURE_VIEWS = 2
-PICTURE, RESULTS = Path("docs/room_capture.png"), REPO / "benchmarks" / "results" / "room_capture" / "results.jsonl"
+PICTURE = Path("docs/room_capture.png")
+RESULTS = harness.REPO / "benchmarks" / "results" / "room_capture" / "results.jsonl"
 NO_MESH = {"chamfer": None, "mesh_to_truth": None, "truth_to_mesh": None}
 
 
@@ -62,10 +43,10 @@ def mesh_scores(run_dir: Path, work: Path, key: str, room: Path) -> dict:
     """The exported mesh, cropped to the object's box (capture frame), against points on the true object's surface."""
     path = work / f"{key}.ply"
     cmd = [
-        str(BIN / "fourierf-export"), "marching-cubes", "--load-config", str(run_dir / "config.json"),
+        str(harness.BIN / "fourierf-export"), "marching-cubes", "--load-config", str(run_dir / "config.json"),
         "--output-path", str(path), "--resolution", "192", "--overwrite",
     ]  # fmt: skip
-    if run_timed(cmd, work / f"{key}.export.log")[2] != 0:
+    if harness.run_timed(cmd, work / f"{key}.export.log")[2] != 0:
         return NO_MESH
     bounds = np.asarray(json.loads((room / "geometry.json").read_text())["object"]["bounds"], dtype=np.float64)
     mesh = crop(trimesh.load(path, force="mesh"), bounds)
@@ -76,16 +57,16 @@ def mesh_scores(run_dir: Path, work: Path, key: str, room: Path) -> dict:
     return {"chamfer": cd["chamfer"], "mesh_to_truth": cd["a_to_b_mean"], "truth_to_mesh": cd["b_to_a_mean"]}
 
 
-def execute(run: Run, room: Path, work: Path, lpips: Path, threads: int | None) -> dict:
+def execute(run: harness.Run, room: Path, work: Path, lpips: Path, threads: int | None) -> dict:
     out_dir = work / "runs"
     run_dir = out_dir / room.name / run.method / run.key
     views = [] if run.views == "all" else ["--num-views", run.views]
     count = ["--max-num-iterations", str(run.iters)] if run.iters else []
-    done = done_record(read_metrics(run_dir / "metrics.jsonl"))
+    done = harness.done_record(harness.read_jsonl(run_dir / "metrics.jsonl", torn=True))
     if done is None:
-        cmd = train_cmd(run.method, room, out_dir, run.key, "--seed", str(run.seed), *count, *thread_flags(threads),
-                        "nerfstudio-data", *views)  # fmt: skip
-        seconds, rss = run_checked(cmd, work / f"{run.key}.train.log", "training")
+        cmd = harness.train_cmd(run.method, room, out_dir, run.key, "--seed", str(run.seed), *count,
+                                *harness.thread_flags(threads), "nerfstudio-data", *views)  # fmt: skip
+        seconds, rss = harness.run_checked(cmd, work / f"{run.key}.train.log", "training")
     else:  # trained by an earlier invocation that stopped before its row was written
         seconds, rss = float(done["train_seconds"]), None
     config = json.loads((run_dir / "config.json").read_text())["config"]
@@ -95,13 +76,12 @@ def execute(run: Run, room: Path, work: Path, lpips: Path, threads: int | None) 
         "train_views": len(json.loads((run_dir / "views.json").read_text())["train_view_ids"]),
         "run_dir": str(run_dir),
     }  # fmt: skip
-    row |= evaluate(run_dir, run.key, work, lpips, threads=threads)
+    row |= harness.evaluate(run_dir, run.key, work, lpips, threads=threads)
     return row | mesh_scores(run_dir, work, run.key, room)
 
 
 def picture(rows: dict[str, dict], room: Path, work: Path, threads: int | None, path: Path) -> None:
-    """Test views, one row each: the photo, then each method's RGB and depth (``rows``: its 8-view run's row). A picture
-    already drawn is kept when the recorded runs it shows are not on this machine."""
+    """Test views, one row each: the photo, then each method's RGB and depth (``rows``: its 8-view run's row)."""
     missing = [row["run_dir"] for row in rows.values() if not (Path(row["run_dir"]) / "config.json").is_file()]
     if missing and path.is_file():
         print(f"kept {path}: the recorded runs it shows are not on this machine ({', '.join(missing)})")
@@ -116,8 +96,9 @@ def picture(rows: dict[str, dict], room: Path, work: Path, threads: int | None, 
         folders[method] = work / f"{row['key']}_renders"
         if not folders[method].is_dir():
             cmd = [
-                str(BIN / "fourierf-render"), "dataset", "--load-config", str(Path(row["run_dir"]) / "config.json"),
-                "--output-dir", str(folders[method]), "--outputs", "rgb", "depth", "--no-video", *thread_flags(threads),
+                str(harness.BIN / "fourierf-render"), "dataset", "--load-config",
+                str(Path(row["run_dir"]) / "config.json"), "--output-dir", str(folders[method]), "--outputs", "rgb",
+                "depth", "--no-video", *harness.thread_flags(threads),
             ]  # fmt: skip
             subprocess.run(cmd, check=True, capture_output=True)
     names = sorted(p.stem for p in (folders[METHODS[0]] / "rgb").glob("*.png"))[::3][:PICTURE_VIEWS]
@@ -131,9 +112,9 @@ def picture(rows: dict[str, dict], room: Path, work: Path, threads: int | None, 
     iio.imwrite(path, np.concatenate(lines, axis=0))
 
 
-def section(rows: list[tuple[Run, dict]], seed: int, picture_link: Path) -> list[str]:
+def section(rows: list[tuple[harness.Run, dict]], seed: int, picture_link: Path) -> list[str]:
     lines = [
-        *section_head(
+        *harness.section_head(
             "Object in a room: a synthetic phone capture (unbounded scene)",
             "python benchmarks/room_capture.py",
             "`fourierf-synth --kind room` (160×120 RGB, no alpha, 30 training photos on a 110° arc, 8 test views "
@@ -162,27 +143,27 @@ def section(rows: list[tuple[Run, dict]], seed: int, picture_link: Path) -> list
 
 
 def main() -> None:
-    ap = arguments(__doc__, "bench_room_capture")
+    ap = harness.arguments(__doc__, "bench_room_capture")
     ap.add_argument("--seed", type=int, default=20211202)
     ap.add_argument("--threads", type=int, default=None)
     args = ap.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
     room = args.work / "room"
     if not (room / "transforms.json").is_file():
-        subprocess.run([str(BIN / "fourierf-synth"), "--output-dir", str(room), "--kind", "room"], check=True)
-    lpips = args.shared / "lpips" / "lpips_alex_v0.1.pth"
-    plan = [Run(m, 0, args.seed, v) for v in VIEWS for m in METHODS]
-    plan += [Run(m, FEW_SHOT_COUNT, args.seed, "all") for m in METHODS]
-    run_all([Job(r.key, args.work / r.key, partial(execute, r, room, args.work, lpips, args.threads)) for r in plan],
-            RESULTS)  # fmt: skip
-    results = load_results(RESULTS)
+        subprocess.run([str(harness.BIN / "fourierf-synth"), "--output-dir", str(room), "--kind", "room"], check=True)
+    lpips = args.shared / harness.LPIPS
+    plan = [harness.Run(m, 0, args.seed, v) for v in VIEWS for m in METHODS]
+    plan += [harness.Run(m, FEW_SHOT_COUNT, args.seed, "all") for m in METHODS]
+    run = partial(execute, room=room, work=args.work, lpips=lpips, threads=args.threads)
+    harness.run_all([harness.Job(r.key, args.work / r.key, partial(run, r)) for r in plan], RESULTS)
+    results = harness.load_results(RESULTS)
     failed = [r.key for r in plan if r.key not in results]
     if failed:
         sys.exit(f"error: {len(failed)} runs failed (their logs are under {args.work}); run again")
-    eight = {m: results[Run(m, 0, args.seed, "8").key] for m in METHODS}
-    picture(eight, room, args.work, args.threads, REPO / PICTURE)
+    eight = {m: results[harness.Run(m, 0, args.seed, "8").key] for m in METHODS}
+    picture(eight, room, args.work, args.threads, harness.REPO / PICTURE)
     rows = [(r, results[r.key]) for r in plan]
-    write_section(args.markdown, "room-capture", "room_capture.py", section(rows, args.seed, PICTURE))
+    harness.write_section(args.markdown, "room-capture", "room_capture.py", section(rows, args.seed, PICTURE))
 
 
 if __name__ == "__main__":

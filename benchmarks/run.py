@@ -22,49 +22,26 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from harness import (
-    EQUAL_ITERATIONS_RESULTS,
-    EQUAL_TIME_RESULTS,
-    QUALITY_RESULTS,
-    REPO,
-    Job,
-    Run,
-    Suite,
-    applies,
-    chosen_setting,
-    cpu_and_cores,
-    done_record,
-    evaluate,
-    load_results,
-    load_suite,
-    read_metrics,
-    record,
-    rows_by,
-    run_all,
-    setting_flags,
-    train_and_eval,
-    train_command,
-)
+import harness
 
 from fourierf_plugin.method_configs.time_budget import parse_duration
 from fourierf_plugin.utils.errors import UserError
 
-SUITE = load_suite()
-Point = tuple[str, str, str, Run]
-"""(scene, protocol, setting, run)."""
+SUITE = harness.load_suite()
+Point = tuple[str, str, str, harness.Run]  # (scene, protocol, setting, run)
 
 
-def execute(point: Point, args: argparse.Namespace, suite: Suite = SUITE) -> dict:
+def execute(point: Point, args: argparse.Namespace, suite: harness.Suite = SUITE) -> dict:
     scene, protocol, setting, run = point
     extra = [*suite.protocols[protocol].flags(), "--device", args.device, "--budget-rule", "False",
-             *setting_flags(setting)]  # fmt: skip
+             *harness.setting_flags(setting)]  # fmt: skip
     every = suite.curve_every
     if args.stage == "curve":  # keep a checkpoint every ``curve_every`` iterations (the later flag wins)
         extra += ["--steps-per-save", str(every), "--keep-checkpoints", str(run.iters // every + 1)]
     data = args.data / suite.scenes[scene]["path"]
     lpips, work = args.lpips, args.work / scene
-    row = train_and_eval(run, data, suite.parser_args(scene, protocol), work, lpips, scene, extra, args.threads)
-    row |= evaluate(Path(row["run_dir"]), run.key, work, lpips, split="val", threads=args.threads)
+    row = harness.train_and_eval(run, data, suite.parser_args(scene, protocol), work, lpips, scene, extra, args.threads)
+    row |= harness.evaluate(Path(row["run_dir"]), run.key, work, lpips, split="val", threads=args.threads)
     if args.stage == "curve":
         row["curve"] = [
             *curve_points(Path(row["run_dir"]), run, work, lpips, args.threads),
@@ -73,7 +50,7 @@ def execute(point: Point, args: argparse.Namespace, suite: Suite = SUITE) -> dic
     return row | {"scene": scene, "protocol": protocol, "setting": setting, "device": args.device}
 
 
-def curve_points(run_dir: Path, run: Run, work: Path, lpips: Path, threads: int | None) -> list[list[float]]:
+def curve_points(run_dir: Path, run: harness.Run, work: Path, lpips: Path, threads: int | None) -> list[list[float]]:
     """[step, val PSNR, test PSNR] of every checkpoint before the last (the row itself holds the last)."""
     points = []
     for ckpt in sorted((run_dir / "checkpoints").glob("step-*.ckpt")):
@@ -81,24 +58,24 @@ def curve_points(run_dir: Path, run: Run, work: Path, lpips: Path, threads: int 
         if step >= run.iters:
             continue
         key = f"{run.key}.step{step}"
-        val = evaluate(run_dir, key, work, lpips, split="val", checkpoint=ckpt, threads=threads)["val_psnr"]
-        points.append([step, val, evaluate(run_dir, key, work, lpips, checkpoint=ckpt, threads=threads)["psnr"]])
+        val = harness.evaluate(run_dir, key, work, lpips, split="val", checkpoint=ckpt, threads=threads)["val_psnr"]
+        test = harness.evaluate(run_dir, key, work, lpips, checkpoint=ckpt, threads=threads)["psnr"]
+        points.append([step, val, test])
     return points
 
 
-def quality_job(point: Point, args: argparse.Namespace) -> Job:
+def quality_job(point: Point, args: argparse.Namespace) -> harness.Job:
     scene, run = point[0], point[3]
-    return Job(f"{scene}/{run.key}", args.work / scene / run.key, lambda: execute(point, args))
+    return harness.Job(f"{scene}/{run.key}", args.work / scene / run.key, lambda: execute(point, args))
 
 
 # -- equal time and equal iterations: each method given the same wall time (``--time-budget``) or iterations ("800it")
 # on each scene, as a user would run it with no size flag; a budget too short for a method's fewest iterations is a
 # row that says so, not a failure.
-THREADS = 1
-"""One thread a run: a CPU run is then bit-reproducible, and two run side by side on two cores."""
+THREADS = 1  # a CPU run is then bit-reproducible, and two run side by side on two cores
 TOO_SHORT = re.compile(r"--time-budget \S+ is too short[^\n]*")
-ESTIMATE = re.compile(r"~([0-9.e+-]+) s per iteration")
-"""The trainer's own estimate in its too-short message: a method too slow for every budget still gets a speed."""
+ESTIMATE = re.compile(r"~([0-9.e+-]+) s per iteration")  # the too-short message's: a speed for the slowest methods
+TrainArgs = tuple[harness.Run, Path, list[str], Path, list[str]]  # ``train_and_eval``'s first arguments
 
 
 def budget_iterations(budget: str) -> int | None:
@@ -117,31 +94,33 @@ class TimedPoint:
     def key(self) -> str:
         return f"{self.scene}/{self.method}/{self.budget}"
 
-    def variant(self, suite: Suite) -> dict:
+    def variant(self, suite: harness.Suite) -> dict:
         return suite.equal_time["iterations"].get("variants", {}).get(self.method, {})
 
-    def run(self, suite: Suite) -> Run:
+    def run(self, suite: harness.Suite) -> harness.Run:
         iterations, seed = budget_iterations(self.budget), suite.equal_time["seed"]
         if iterations is None:
-            return Run(self.method, 0, seed, "equal-time", self.budget)
+            return harness.Run(self.method, 0, seed, "equal-time", self.budget)
         method = self.variant(suite).get("method", self.method)
-        return Run(method, iterations, seed, "equal-iterations", self.budget, name=self.method)
+        return harness.Run(method, iterations, seed, "equal-iterations", self.budget, name=self.method)
 
-    def train_args(self, suite: Suite, data: Path, work: Path) -> tuple[Run, Path, list[str], Path, list[str]]:
+    def train_args(self, suite: harness.Suite, data: Path, work: Path) -> TrainArgs:
         """``train_and_eval``'s run, data, parser flags, work folder and extra flags (a variant's own)."""
         parser = suite.parser_args(self.scene, suite.equal_time["protocol"])
         flags = list(self.variant(suite).get("flags", []))
         return self.run(suite), data / suite.scenes[self.scene]["path"], parser, work / self.scene, flags
 
 
-def timed_plan(suite: Suite, scenes: Sequence[str], budgets: Sequence[str], only: Sequence[str] | None = None) -> list:
+def timed_plan(
+    suite: harness.Suite, scenes: Sequence[str], budgets: Sequence[str], only: Sequence[str] | None = None
+) -> list:
     """The equal-time points, longest budget first (two jobs at once end on short runs)."""
     longest_first = sorted(budgets, key=parse_duration, reverse=True)
     return [TimedPoint(s, m, b) for b in longest_first for s in scenes for m in only or suite.equal_time["methods"]]
 
 
 def iteration_plan(
-    suite: Suite, scenes: Sequence[str], only: Sequence[str] | None = None, budget: str | None = None
+    suite: harness.Suite, scenes: Sequence[str], only: Sequence[str] | None = None, budget: str | None = None
 ) -> list[TimedPoint]:
     """The equal-iterations points in the suite's method order (slowest first), a variant only on its scenes."""
     stage = suite.equal_time["iterations"]
@@ -149,10 +128,10 @@ def iteration_plan(
     return [p for p in points if p.scene in p.variant(suite).get("scenes", scenes)]
 
 
-def point_command(point: TimedPoint, suite: Suite, data: Path, work: Path) -> list[str]:
+def point_command(point: TimedPoint, suite: harness.Suite, data: Path, work: Path) -> list[str]:
     """The training command ``execute_timed`` runs for a point."""
     run, scene_data, parser, scene_work, flags = point.train_args(suite, data, work)
-    return train_command(run, scene_data, scene_work / "runs", parser, flags, threads=THREADS)
+    return harness.train_command(run, scene_data, scene_work / "runs", parser, flags, threads=THREADS)
 
 
 def too_short(log: Path) -> str | None:
@@ -161,24 +140,26 @@ def too_short(log: Path) -> str | None:
     return found.group(0) if found else None
 
 
-def execute_timed(point: TimedPoint, suite: Suite, data: Path, work: Path, lpips: Path, jobs: int) -> dict:
+def execute_timed(point: TimedPoint, suite: harness.Suite, data: Path, work: Path, lpips: Path, jobs: int) -> dict:
     """Train and evaluate one point; its row (planned and actual training seconds from the run's metrics)."""
     started, (run, scene_data, parser, scene_work, flags) = time.perf_counter(), point.train_args(suite, data, work)
     iterations = budget_iterations(point.budget)
     size = {"budget_iterations": iterations} if iterations else {"budget_seconds": parse_duration(point.budget)}
     row = {
         "scene": point.scene, "method": point.method, "budget": point.budget, **size, "flags": flags,
-        "threads": THREADS, "jobs": jobs, "machine": cpu_and_cores(),
+        "threads": THREADS, "jobs": jobs, "machine": harness.cpu_and_cores(),
     }  # fmt: skip
     try:
-        trained = train_and_eval(run, scene_data, parser, scene_work, lpips, point.scene, flags, threads=THREADS)
+        trained = harness.train_and_eval(
+            run, scene_data, parser, scene_work, lpips, point.scene, flags, threads=THREADS
+        )
     except RuntimeError:
         if (message := too_short(scene_work / f"{run.key}.train.log")) is None:
             raise
         estimate = ESTIMATE.search(message)
         row |= {"estimated_seconds_per_iteration": float(estimate.group(1))} if estimate else {}
         return row | {"too_short": message, "seconds": time.perf_counter() - started}
-    done = done_record(read_metrics(Path(trained["run_dir"]) / "metrics.jsonl")) or {}
+    done = harness.done_record(harness.read_jsonl(Path(trained["run_dir"]) / "metrics.jsonl", torn=True)) or {}
     iterations, seconds = int(done["step"]), float(done["train_seconds"])
     return row | {
         "planned_seconds": done.get("planned_train_seconds"), "trained_seconds": seconds, "iterations": iterations,
@@ -188,16 +169,15 @@ def execute_timed(point: TimedPoint, suite: Suite, data: Path, work: Path, lpips
     }  # fmt: skip
 
 
-def timed_job(point: TimedPoint, args: argparse.Namespace) -> Job:
+def timed_job(point: TimedPoint, args: argparse.Namespace) -> harness.Job:
     execute = lambda: execute_timed(point, SUITE, args.data, args.work, args.lpips, args.jobs)  # noqa: E731
-    return Job(point.key, args.work / point.scene / point.run(SUITE).key, execute)
+    return harness.Job(point.key, args.work / point.scene / point.run(SUITE).key, execute)
 
 
-ROW_FIELDS = ("key", "scene", "protocol", "method", "setting", "seed", "val_psnr", "psnr")
-"""What the report reads of a row: a row merged from elsewhere must carry each."""
+ROW_FIELDS = ("key", "scene", "protocol", "method", "setting", "seed", "val_psnr", "psnr")  # what the report reads
 
 
-def read_rows(source: Path, suite: Suite = SUITE) -> list[dict]:
+def read_rows(source: Path, suite: harness.Suite = SUITE) -> list[dict]:
     """The rows of a results file written elsewhere, checked for what the report reads (ValueError names the line)."""
     if not source.is_file():
         raise ValueError(f"{source}: no such results file; pass the --results path a sweep, seeds or curve stage wrote")
@@ -220,30 +200,28 @@ def read_rows(source: Path, suite: Suite = SUITE) -> list[dict]:
 
 
 def merge(path: Path, sources: Sequence[Path], again: str | None) -> list[str]:
-    """Record the rows of ``sources`` (runs trained elsewhere) as ``run_all`` records a finished run, every source
-    checked before anything is written."""
+    """Record the rows of ``sources`` (runs trained elsewhere) as ``run_all`` would, all checked before any is."""
     if any(source.resolve() == path.resolve() for source in sources):
         raise ValueError(f"{path}: the results cannot be merged into themselves; pass the other run's --results file")
-    rows, held, lines = [row for source in sources for row in read_rows(source)], set(load_results(path)), []
+    rows, held, lines = [row for source in sources for row in read_rows(source)], set(harness.load_results(path)), []
     for row in rows:
         if row["key"] in held and again is None:
             lines.append(f"{row['key']}: recorded, skipped (--again NOTE keeps this row, the earlier to the repeats)")
             continue
-        record(path, row, again)
+        harness.record(path, row, again)
         held.add(row["key"])
         threads = row.get("train_threads", "?")
         lines.append(f"{row['key']}: val {row['val_psnr']:.2f}  test {row['psnr']:.2f}  (threads {threads})")
     return lines
 
 
-def point(scene: str, protocol: str, method: str, setting: str, seed: int, suite: Suite = SUITE) -> Point:
-    return scene, protocol, setting, Run(method, suite.protocols[protocol].iters, seed, f"{protocol}_{setting}")
+def point(scene: str, protocol: str, method: str, setting: str, seed: int, suite: harness.Suite = SUITE) -> Point:
+    return scene, protocol, setting, harness.Run(method, suite.protocols[protocol].iters, seed, f"{protocol}_{setting}")
 
 
-def plan(args: argparse.Namespace, suite: Suite = SUITE) -> list[Point]:
-    """The stage's points. A sweep runs every setting that applies at the first seed; seeds (at the later seeds) and
-    curve (at the first) run ``--only``'s settings, else the val choice of the protocol (curve: of its ``curve_of``)."""
-    sweep, results = args.stage == "sweep", {} if args.stage == "sweep" else load_results(args.results)
+def plan(args: argparse.Namespace, suite: harness.Suite = SUITE) -> list[Point]:
+    """The stage's points: a sweep's every setting at the first seed; seeds and curve, --only's or the val choice."""
+    sweep, results = args.stage == "sweep", {} if args.stage == "sweep" else harness.load_results(args.results)
     seeds = (args.seeds or suite.seeds[1:]) if args.stage == "seeds" else suite.seeds[:1]
     points = []
     for p in args.protocol:
@@ -256,23 +234,28 @@ def plan(args: argparse.Namespace, suite: Suite = SUITE) -> list[Point]:
                     settings = [s for s in suite.settings[scene] if not args.only or s in args.only]
                 elif args.only:
                     settings = args.only
-                elif (best := chosen_setting(rows_by(results, scene, chosen_of, method), suite.seeds)) is None:
-                    sys.exit(f"error: no sweep result for {scene} {chosen_of} {method}; run the sweep stage first "
-                             "or pass --only")  # fmt: skip
                 else:
+                    best = harness.chosen_setting(harness.rows_by(results, scene, chosen_of, method), suite.seeds)
+                    if best is None:
+                        sys.exit(f"error: no sweep result for {scene} {chosen_of} {method}; run the sweep stage "
+                                 "first or pass --only")  # fmt: skip
                     settings = [best]
-                points += [point(scene, p, method, s, seed) for s in settings if applies(method, s) for seed in seeds]
+                points += [
+                    point(scene, p, method, s, seed) for s in settings if harness.applies(method, s) for seed in seeds
+                ]
     return points
 
 
-def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argparse.Namespace:
+def parse_args(argv: Sequence[str] | None = None, suite: harness.Suite = SUITE) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("stage", choices=("sweep", "seeds", "curve", "merge", "equal-time", "equal-iterations"))
     ap.add_argument("--protocol", nargs="+", choices=tuple(suite.protocols), help="default: cpu-800 mid-3000 mid-800; "
                     "curve: cpu-3000")  # fmt: skip
     ap.add_argument("--scene", nargs="+", choices=tuple(suite.settings), default=list(suite.settings))
-    ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data", help="holds blender/lego, llff/fern")
-    ap.add_argument("--lpips", type=Path, default=REPO.parent / "shared" / "lpips" / "lpips_alex_v0.1.pth")
+    ap.add_argument(
+        "--data", type=Path, default=harness.REPO.parent / "shared" / "data", help="holds blender/lego, llff/fern"
+    )
+    ap.add_argument("--lpips", type=Path, default=harness.REPO.parent / "shared" / harness.LPIPS)
     ap.add_argument("--work", type=Path, help="run folders and logs (default: outputs/bench_STAGE)")
     ap.add_argument("--results", type=Path, help="one row a finished run (default: the stage's, benchmarks/results/)")
     ap.add_argument("--budget", nargs="+", help="equal-time: each point's --time-budget; equal-iterations: one count "
@@ -293,9 +276,11 @@ def parse_args(argv: Sequence[str] | None = None, suite: Suite = SUITE) -> argpa
     ap.add_argument("--rows", nargs="+", type=Path, metavar="FILE", help="merge: results files written elsewhere")
     args = ap.parse_args(argv)
     stage, timed, counted = args.stage, args.stage == "equal-time", args.stage == "equal-iterations"
-    results = {"equal-time": EQUAL_TIME_RESULTS, "equal-iterations": EQUAL_ITERATIONS_RESULTS}
-    args.work = args.work or REPO / "outputs" / f"bench_{stage.replace('-', '_') if stage in results else 'quality'}"
-    args.results = args.results or results.get(stage, QUALITY_RESULTS)
+    results = {"equal-time": harness.EQUAL_TIME_RESULTS, "equal-iterations": harness.EQUAL_ITERATIONS_RESULTS}
+    args.work = (
+        args.work or harness.REPO / "outputs" / f"bench_{stage.replace('-', '_') if stage in results else 'quality'}"
+    )
+    args.results = args.results or results.get(stage, harness.QUALITY_RESULTS)
     if args.budget is not None and not (timed or counted):
         sys.exit(f"error: --budget sets the equal-time stage's budgets; drop it for the {stage} stage")
     if counted and args.budget and (len(args.budget) != 1 or not budget_iterations(args.budget[0])):
@@ -344,9 +329,9 @@ def main() -> None:
                 points = iteration_plan(SUITE, args.scene, args.methods, args.budget[0])
         except UserError as err:  # a --budget that is no duration
             sys.exit(f"error: --budget: {err}")
-        return run_all([timed_job(p, args) for p in points], args.results, args.jobs, args.again)
+        return harness.run_all([timed_job(p, args) for p in points], args.results, args.jobs, args.again)
     points = sorted(plan(args), key=lambda p: (-p[3].iters, p[0] != "fern"))  # longest first: the pool ends on short
-    run_all([quality_job(p, args) for p in points], args.results, args.jobs, args.again)
+    harness.run_all([quality_job(p, args) for p in points], args.results, args.jobs, args.again)
 
 
 if __name__ == "__main__":

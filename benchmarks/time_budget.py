@@ -1,6 +1,5 @@
-"""``fourierf-train fourierf-vm --time-budget B`` on the bundled 4-view lego and on fern (3 views), three budgets each,
-one run at a time: the planned iterations and seconds, the training seconds spent and the whole command's wall time,
-against the budget (training ends within ``TOLERANCE`` of it).
+"""``fourierf-train fourierf-vm --time-budget B`` on the bundled lego and on fern, three budgets each, one at a time:
+planned against actual iterations and seconds (training should end within ``TOLERANCE`` of the budget).
 
     python benchmarks/time_budget.py [--shared PATH] [--work outputs/bench_time_budget]
 """
@@ -10,25 +9,22 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from harness import REPO, arguments, done_record, section_head, train_run, write_section
+import harness
 
 from fourierf_plugin.method_configs.time_budget import parse_duration
 
-TOLERANCE = 0.10
-"""Training may end this share of the budget early or late."""
-SCENES = {
+TOLERANCE = 0.10  # training may end this share of the budget early or late
+SCENES = {  # its data (the repository's, or under --shared), budgets and parser flags
     "lego_tiny": (Path("demo/lego_tiny"), ("1m", "2m", "3m"), ()),
     "fern, 3 views": (Path("data/llff/fern"), ("2m", "3m", "4m"), ("llff-data", "--num-views", "3")),
 }
-"""Scene: its data (the repository's, or under --shared), budgets and parser flags."""
 
 
 def measure(data: Path, budget: str, parser: tuple[str, ...], work: Path, name: str) -> dict:
-    _, records, wall, _ = train_run(data, work, name, "--time-budget", budget, *parser)
-    done = done_record(records) or {}
-    budget_s = parse_duration(budget)
+    _, records, wall, _ = harness.train_run(data, work, name, "--time-budget", budget, *parser)
+    done = harness.done_record(records) or {}
     return {
-        "budget": budget, "budget_seconds": budget_s, "iterations": done.get("step"),
+        "budget": budget, "budget_seconds": parse_duration(budget), "iterations": done.get("step"),
         "planned_iterations": done.get("planned_iterations", done.get("step")),
         "planned_seconds": done.get("planned_train_seconds"), "train_seconds": done.get("train_seconds"),
         "wall_seconds": wall,
@@ -43,7 +39,7 @@ def within(row: dict) -> bool:
 def section(rows: dict[str, list[dict]]) -> list[str]:
     runs = [r for scene in rows.values() for r in scene]
     return [
-        *section_head(
+        *harness.section_head(
             "Time budgets: planned against actual (fourierf-train --time-budget)",
             "python benchmarks/time_budget.py",
             "`fourierf-train fourierf-vm --data DATA --time-budget B` with every other value at its default, one run "
@@ -65,16 +61,15 @@ def section(rows: dict[str, list[dict]]) -> list[str]:
 
 
 def main() -> dict:
-    ap = arguments(__doc__, "bench_time_budget")
-    args = ap.parse_args()
+    args = harness.arguments(__doc__, "bench_time_budget").parse_args()
     rows: dict[str, list[dict]] = {}
     for scene, (data, budgets, parser) in SCENES.items():
-        root = REPO if (REPO / data).exists() else args.shared
+        root = harness.REPO if (harness.REPO / data).exists() else args.shared
         rows[scene] = [measure(root / data, b, parser, args.work, f"{scene.split(',')[0]}_{b}") for b in budgets]
         for r in rows[scene]:
             print(f"{scene} {r['budget']}: trained {r['train_seconds']:.1f} s of {r['budget_seconds']:.0f} s")
     (args.work / "results.json").write_text(json.dumps(rows, indent=2))
-    write_section(args.markdown, "time-budget", "time_budget.py", section(rows))
+    harness.write_section(args.markdown, "time-budget", "time_budget.py", section(rows))
     return rows
 
 

@@ -1,5 +1,5 @@
-"""Viewer benchmark: camera-move-to-preview latency and the final picture's time on the P-CPU lego run served to a
-headless chromium, and the training slowdown of ``--viewer`` (three arms interleaved, ``ARMS``).
+"""The viewer's latency (camera move to preview, to final picture) on P-CPU lego in a headless chromium, and the
+training slowdown of ``--viewer`` (``ARMS`` interleaved).
 
     python benchmarks/viewer_latency.py [--run RUN/config.json] [--rounds 2]   # trains P-CPU first without --run
     python benchmarks/viewer_latency.py --run RUN/config.json --screenshots-only   # docs/viewer_lego_f1.png, f005.png
@@ -20,23 +20,8 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
+import harness
 import numpy as np
-from harness import (
-    GRID_FLAGS,
-    LEGO_VIEWS,
-    PCPU_LEGO_PARSER,
-    REPO,
-    arguments,
-    done_record,
-    elapsed_by_step,
-    read_metrics,
-    run_checked,
-    run_dir_in,
-    section_head,
-    table,
-    train_cmd,
-    write_section,
-)
 
 from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.scripts.viewer import ViewerConfig, ViewerHandle, serve
@@ -44,14 +29,11 @@ from fourierf_plugin.viewer.headless import CHROMIUM, CHROMIUM_ARGS
 from fourierf_plugin.viewer.render_service import camera_from_dataset, render_view
 from fourierf_plugin.viewer.scene_view import scene_layout
 
-SQUARE_WINDOW = {"width": 704, "height": 704}
-"""A square page, so the preview is 256×256."""
+SQUARE_WINDOW = {"width": 704, "height": 704}  # a square page, so the preview is 256×256
 LATENCY_TARGET_S = 0.5
 SLOWDOWN_TARGET = 0.10
-BUDGET = TrainerConfig.viewer_max_slowdown
-"""``--viewer-max-slowdown``'s default, the budget the viewer arm runs at."""
-STEADY_FROM = 200
-"""First step of the steady-state window: by then the browser has loaded the page (its largest one-off cost)."""
+BUDGET = TrainerConfig.viewer_max_slowdown  # the viewer arm's: --viewer-max-slowdown's default
+STEADY_FROM = 200  # the steady state's first step: the browser has loaded the page (its largest one-off cost)
 ARMS = {"plain": None, "browser": ["--viewer-max-slowdown", "0.001"], "viewer": []}
 """The slowdown's arms: no viewer; the browser on a viewer that draws almost nothing; the viewer at its budget."""
 VIEWER_SHARE = re.compile(r"live viewer: .*?([0-9.]+) s of the training's time")
@@ -99,8 +81,8 @@ def wait_for(condition: Callable[[], bool], seconds: float, what: str) -> None:
 
 
 def pcpu_train(data: Path, out: Path, stamp: str, iters: int, *extra: str) -> list:
-    return train_cmd("fourierf-vm", data, out, stamp, "--max-num-iterations", str(iters), *GRID_FLAGS, *extra,
-                     *PCPU_LEGO_PARSER)  # fmt: skip
+    flags = ["--max-num-iterations", str(iters), *harness.GRID_FLAGS, *extra, *harness.PCPU_LEGO_PARSER]
+    return harness.train_cmd("fourierf-vm", data, out, stamp, *flags)
 
 
 def browser_cpu_seconds() -> float:
@@ -136,8 +118,7 @@ def orbit_moves(handle: ViewerHandle, n: int) -> list[tuple[np.ndarray, np.ndarr
 
 
 def timed_moves(handle: ViewerHandle, moves: int, final: bool, settle: float) -> Iterator[tuple[object, float]]:
-    """Turn the browser's camera (from the server, as a drag would) ``moves`` times: each time the first preview
-    (``final``: the final picture) sent afterwards and the seconds from the command to it (None: none within 60 s)."""
+    """Turn the browser's camera ``moves`` times from the server: each first preview (``final``: picture), its delay."""
     view = handle.view
     wait_for(lambda: view.client_count > 0, 60, "the browser to connect")
     wait_for(lambda: view.final_renders > 0, 120, "the first final render")
@@ -162,8 +143,7 @@ def timed_moves(handle: ViewerHandle, moves: int, final: bool, settle: float) ->
 
 
 def latency_on(config: Path, moves: int) -> dict:
-    """Seconds from a camera command to the first preview, per move, what those previews rendered, and the model's
-    full-quality render of a 256×256 view (the final picture's path) without a browser drawing."""
+    """Seconds from each camera command to its first preview, what they rendered, and a full-quality 256×256 render."""
     with served(config, preview_side=256, final_side=512) as (handle, _):
         answered = [(r, s) for r, s in timed_moves(handle, moves, final=False, settle=1.0) if r is not None]
         if not answered:
@@ -201,7 +181,9 @@ def train_with_browser(cmd: list[str], port: int, log: Path) -> float:
         cpu_before = browser_cpu_seconds()
         with log.open("w") as fh:
             # No terminal on stdin: the run closes its page when it ends instead of serving the finished run.
-            proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=fh, stderr=subprocess.STDOUT, cwd=REPO)
+            proc = subprocess.Popen(
+                cmd, stdin=subprocess.DEVNULL, stdout=fh, stderr=subprocess.STDOUT, cwd=harness.REPO
+            )
         try:
             url = f"http://127.0.0.1:{port}/"
             wait_for(lambda: proc.poll() is not None or page_up(url), 300, "the training's viewer page")
@@ -235,28 +217,26 @@ def measure_slowdown(data: Path, work: Path, rounds: int, iters: int) -> dict:
     """Interleaved rounds of the arms, the order rotating; training seconds of each, whole and from ``STEADY_FROM``."""
     runs: dict[str, list[dict[str, float]]] = {arm: [] for arm in ARMS}  # per arm, one row a training
     out = work / "ab" / time.strftime("%Y%m%d-%H%M%S")  # this invocation's own runs, never an earlier one's
-    names = list(ARMS)
-    for i in range(rounds):
-        for arm in names[i % len(names) :] + names[: i % len(names)]:
-            stamp, port, flags = f"{arm}-{i}", free_port(), ARMS[arm]
-            extra = [] if flags is None else ["--viewer", "True", "--viewer-port", str(port), *flags]
-            cmd, log = pcpu_train(data, out, stamp, iters, *extra), work / f"{stamp}.log"
-            print(f"training {stamp} ...", flush=True)
-            run: dict[str, float] = {}
-            if flags is None:
-                run_checked(cmd, log, "training")
-            else:
-                run["browser_cpu"] = train_with_browser(cmd, port, log)
-            records = read_metrics(run_dir_in(out, "fourierf-vm", stamp) / "metrics.jsonl")
-            run["seconds"] = float(done_record(records)["train_seconds"])  # type: ignore[index]
-            if arm == "viewer":
-                run["own_share"] = viewer_seconds(log) / run["seconds"]
-            elapsed = elapsed_by_step(records)
-            if STEADY_FROM not in elapsed:
-                raise RuntimeError(f"{stamp}: metrics.jsonl logs no step {STEADY_FROM}; log every 50 steps")
-            run["steady"] = elapsed[max(elapsed)] - elapsed[STEADY_FROM]
-            runs[arm].append(run)
-            print(f"  {run['seconds']:.1f} s", flush=True)
+    for i, arm in harness.interleaved(rounds, list(ARMS)):
+        stamp, port, flags = f"{arm}-{i}", free_port(), ARMS[arm]
+        extra = [] if flags is None else ["--viewer", "True", "--viewer-port", str(port), *flags]
+        cmd, log = pcpu_train(data, out, stamp, iters, *extra), work / f"{stamp}.log"
+        print(f"training {stamp} ...", flush=True)
+        run: dict[str, float] = {}
+        if flags is None:
+            harness.run_checked(cmd, log, "training")
+        else:
+            run["browser_cpu"] = train_with_browser(cmd, port, log)
+        records = harness.read_jsonl(harness.run_dir_in(out, "fourierf-vm", stamp) / "metrics.jsonl", torn=True)
+        run["seconds"] = float(harness.done_record(records)["train_seconds"])  # type: ignore[index]
+        if arm == "viewer":
+            run["own_share"] = viewer_seconds(log) / run["seconds"]
+        elapsed = harness.elapsed_by_step(records)
+        if STEADY_FROM not in elapsed:
+            raise RuntimeError(f"{stamp}: metrics.jsonl logs no step {STEADY_FROM}; log every 50 steps")
+        run["steady"] = elapsed[max(elapsed)] - elapsed[STEADY_FROM]
+        runs[arm].append(run)
+        print(f"  {run['seconds']:.1f} s", flush=True)
 
     def column(arm: str, key: str) -> list[float]:
         return [run[key] for run in runs[arm]]
@@ -317,7 +297,7 @@ def section(latency: dict, final: dict, ab: dict, command: str, iters: int, roun
         return ", ".join(f"{v:.{digits}f}" for v in values)
 
     settings = (
-        f"P-CPU lego (fourierf-vm, views {' '.join('r_' + v for v in LEGO_VIEWS)}, 100×100, 64³ → 128³, {iters}"
+        f"P-CPU lego (fourierf-vm, views {' '.join('r_' + v for v in harness.LEGO_VIEWS)}, 100×100, 64³ → 128³, {iters}"
         " iterations)."
         " Latency: one headless chromium (704×704 window), the camera turned from the server; time from the command"
         " to the first preview handed to the page's connection. Slowdown: training seconds (metrics.jsonl) of three"
@@ -330,8 +310,8 @@ def section(latency: dict, final: dict, ab: dict, command: str, iters: int, roun
     )
     missed = f" Moves without a preview within 60 s: {latency['missed']}." if latency["missed"] else ""
     return [
-        *section_head("Web viewer: latency and training slowdown", command, settings),
-        *table(["measure", "value", "target"], []),
+        *harness.section_head("Web viewer: latency and training slowdown", command, settings),
+        *harness.table(["measure", "value", "target"], []),
         f"| camera move → preview ({', '.join(latency['sizes'])} shown), median (range) of {len(lats)} moves | "
         f"{latency['median']:.2f} s ({min(lats):.2f}–{max(lats):.2f}; {ok_latency} the target) "
         f"| ≤ {LATENCY_TARGET_S} s |",
@@ -360,12 +340,12 @@ def section(latency: dict, final: dict, ab: dict, command: str, iters: int, roun
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = arguments(__doc__, "bench_viewer")
+    ap = harness.arguments(__doc__, "bench_viewer")
     ap.add_argument("--run", type=Path, help="config.json of a finished P-CPU run (default: train one)")
     ap.add_argument("--moves", type=int, default=8)
     ap.add_argument("--rounds", type=int, default=2, help="rounds of the three slowdown arms")
     ap.add_argument("--iters", type=int, default=800)
-    ap.add_argument("--docs", type=Path, default=REPO / "docs")
+    ap.add_argument("--docs", type=Path, default=harness.REPO / "docs")
     ap.add_argument("--screenshots-only", action="store_true", help="only write the docs/ screenshots (needs --run)")
     args = ap.parse_args(argv)
     data = args.shared / "data" / "blender" / "lego"
@@ -380,8 +360,8 @@ def main(argv: Sequence[str] | None = None) -> None:
             config = existing[0]
         else:
             print("training the P-CPU run ...", flush=True)
-            run_checked(pcpu_train(data, out, stamp, args.iters), args.work / "final.log", "training")
-            config = run_dir_in(out, "fourierf-vm", stamp) / "config.json"
+            harness.run_checked(pcpu_train(data, out, stamp, args.iters), args.work / "final.log", "training")
+            config = harness.run_dir_in(out, "fourierf-vm", stamp) / "config.json"
     if args.screenshots_only:
         args.docs.mkdir(parents=True, exist_ok=True)
         for path in screenshots(config, args.docs):
@@ -393,8 +373,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     print(f"final picture median {final['median']:.2f} s ({final['sizes']})", flush=True)
     ab = measure_slowdown(data, args.work, args.rounds, args.iters)
     command = "python " + " ".join(["benchmarks/viewer_latency.py", *(argv if argv is not None else sys.argv[1:])])
-    write_section(args.markdown, "viewer", "viewer_latency.py", section(latency, final, ab, command, args.iters,
-                                                                         args.rounds))  # fmt: skip
+    body = section(latency, final, ab, command, args.iters, args.rounds)
+    harness.write_section(args.markdown, "viewer", "viewer_latency.py", body)
 
 
 if __name__ == "__main__":

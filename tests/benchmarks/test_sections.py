@@ -67,7 +67,7 @@ SFM_RESULT = {
 
 
 def room_rows() -> list[tuple[object, dict]]:
-    run = load_benchmark("room_capture").Run
+    run = harness.Run
 
     def row(method: str, views: str, psnr: float, chamfer: float | None, iterations: int = 800) -> tuple[object, dict]:
         mesh = {

@@ -344,17 +344,17 @@ def test_a_run_again_moves_the_earlier_row_to_the_repeats_with_its_note(tmp_path
     path = tmp_path / "results.jsonl"
     first, other = _row("tv4", 1, val=21.0, test=20.0), _row("tv6", 1, val=20.0, test=19.0)
     for row in (first, other):
-        runner.record(path, row)
+        harness.record(path, row)
     rerun = first | {"val_psnr": 21.5, "train_threads": 1}
-    runner.record(path, rerun, again="threads not recorded")
+    harness.record(path, rerun, again="threads not recorded")
     results = load_results(path)
     assert results == {first["key"]: rerun, other["key"]: other}  # one row a key, the latest
     assert len(path.read_text().splitlines()) == 2
     repeats = read_jsonl(path.with_name(harness.REPEATS))
     assert repeats == [first | {"repeat": "threads not recorded"}]  # nothing recorded is lost
-    runner.record(path, rerun | {"val_psnr": 21.6}, again="a second rerun")
+    harness.record(path, rerun | {"val_psnr": 21.6}, again="a second rerun")
     assert [r["val_psnr"] for r in read_jsonl(path.with_name(harness.REPEATS))] == [21.0, 21.5]
-    runner.record(path, _row("tv8", 1, val=19.0, test=18.0), again="nothing earlier")  # a new key: nothing moves
+    harness.record(path, _row("tv8", 1, val=19.0, test=18.0), again="nothing earlier")  # a new key: nothing moves
     assert len(read_jsonl(path.with_name(harness.REPEATS))) == 2
 
 
@@ -389,7 +389,7 @@ def test_again_without_a_run_or_a_note_is_one_clear_error(tmp_path: Path, extra:
 def test_run_all_skips_recorded_runs_unless_run_again(tmp_path: Path, monkeypatch) -> None:
     run = harness.Run("fourierf-vm", 800, 1, "cpu-800_tv4")
     path = tmp_path / "results.jsonl"
-    runner.record(path, _row("tv4", 1, val=21.0, test=20.0))
+    harness.record(path, _row("tv4", 1, val=21.0, test=20.0))
     ran = []
 
     def execute(point, args):  # a finished training and evaluation, without either
@@ -399,16 +399,16 @@ def test_run_all_skips_recorded_runs_unless_run_again(tmp_path: Path, monkeypatc
     monkeypatch.setattr(runner, "execute", execute)
     args = argparse.Namespace(results=path, jobs=1, again=None, work=tmp_path)
     point = ("lego", "cpu-800", "tv4", run)
-    runner.run_all([runner.quality_job(point, args)], path)
+    harness.run_all([runner.quality_job(point, args)], path)
     assert ran == [] and load_results(path)[f"lego/{run.key}"]["val_psnr"] == 21.0  # recorded: skipped
-    runner.run_all([runner.quality_job(point, args)], path, again="threads not recorded")
+    harness.run_all([runner.quality_job(point, args)], path, again="threads not recorded")
     assert ran == [run.key] and load_results(path)[f"lego/{run.key}"]["val_psnr"] == 21.5
     assert [r["repeat"] for r in read_jsonl(path.with_name(harness.REPEATS))] == ["threads not recorded"]
 
 
 def test_merge_records_rows_run_elsewhere_as_a_run_would(tmp_path: Path) -> None:
     path, lane = tmp_path / "results.jsonl", tmp_path / "lane" / "results.jsonl"
-    runner.record(path, _row("tv4", 1, val=21.0, test=20.0))
+    harness.record(path, _row("tv4", 1, val=21.0, test=20.0))
     lane.parent.mkdir()
     rerun, new = _row("tv4", 1, val=21.5, test=20.5) | {"train_threads": 1}, _row("tv6", 2, val=20.0, test=19.0)
     lane.write_text(f"{json.dumps(rerun)}\n\n{json.dumps(new)}\n")

@@ -379,10 +379,23 @@ def intrinsics_of(camera: ColmapCamera, where: str) -> Intrinsics:
     )
 
 
-def depth_bounds(model: ColmapModel, near_percentile: float = 0.1, far_percentile: float = 99.9) -> dict[int, tuple]:
-    """(near, far) per image id as LLFF's imgs2poses computes them: percentiles of the depths of the points the image
-    observes. Images that observe no point, or whose near bound is not in front of the camera, are left out."""
+MIN_TRACK_LENGTH = 3
+"""Depth bounds count the points seen in at least this many photos: a point matched in only two is the likeliest to
+be a false match, and one such point in front of the scene would set its nearest bound, and so a forward-facing
+scene's scale. An image that observes no such point falls back to all the points it observes."""
+
+
+def depth_bounds(
+    model: ColmapModel,
+    near_percentile: float = 0.1,
+    far_percentile: float = 99.9,
+    min_track_length: int = MIN_TRACK_LENGTH,
+) -> dict[int, tuple]:
+    """(near, far) per image id as LLFF's imgs2poses computes them, percentiles of the depths of the points the image
+    observes, over the points seen in ``min_track_length`` photos or more. Images that observe no point, or whose
+    near bound is not in front of the camera, are left out."""
     out: dict[int, tuple[float, float]] = {}
+    track_length = np.bincount(model.observation_points, minlength=len(model.points))
     order = np.argsort(model.observation_images, kind="stable")
     image_ids = model.observation_images[order]
     point_idx = model.observation_points[order]
@@ -391,8 +404,10 @@ def depth_bounds(model: ColmapModel, near_percentile: float = 0.1, far_percentil
     for (image_id, image), lo, hi in zip(model.images.items(), starts, ends, strict=True):
         if hi <= lo:
             continue
+        observed = point_idx[lo:hi]
+        tracked = observed[track_length[observed] >= min_track_length]
         rot = qvec_to_rotation(image.qvec)
-        depths = model.points[point_idx[lo:hi]] @ rot[2] + image.tvec[2]  # z of the OpenCV camera: straight ahead
+        depths = model.points[tracked if len(tracked) else observed] @ rot[2] + image.tvec[2]  # OpenCV z: ahead
         near, far = np.percentile(depths, [near_percentile, far_percentile])
         if 0 < near < far:
             out[image_id] = (float(near), float(far))

@@ -108,11 +108,32 @@ def test_depth_bounds_are_percentiles_of_the_observed_depths(tmp_path: Path) -> 
     model = make_model(n_points=200)
     model.tracks = [track if j % 3 else track[:1] for j, track in enumerate(model.tracks)]  # some seen by image 1 only
     read = read_model(write_text(model, tmp_path / "m"))
-    bounds = depth_bounds(read)
+    bounds = depth_bounds(read, min_track_length=1)
     for im in model.images:
         seen = [j for j, track in enumerate(model.tracks) if im.image_id in track]
         depths = (model.points[seen] @ im.rotation.T + im.translation)[:, 2]
         assert bounds[im.image_id] == pytest.approx(tuple(np.percentile(depths, [0.1, 99.9])))
+
+
+def test_depth_bounds_leave_out_points_seen_in_two_photos_only(tmp_path: Path) -> None:
+    model = make_model(n_points=200)
+    clean = depth_bounds(read_model(write_text(model, tmp_path / "clean")))
+    first, second = model.images[:2]
+    stray = 0.9 * (-first.rotation.T @ first.translation)  # close before the first camera's lens
+    model.points = np.concatenate([model.points, stray[None]])
+    model.colors = np.concatenate([model.colors, model.colors[:1]])
+    model.errors = np.concatenate([model.errors, model.errors[:1]])
+    model.tracks = [*model.tracks, [first.image_id, second.image_id]]  # a false match of two photos
+    read = read_model(write_text(model, tmp_path / "stray"))
+    assert depth_bounds(read, min_track_length=1)[first.image_id][0] < 0.5 * clean[first.image_id][0]
+    assert depth_bounds(read) == clean
+
+
+def test_an_image_with_only_short_tracks_keeps_its_bounds(tmp_path: Path) -> None:
+    model = make_model(n_points=200)
+    model.tracks = [track[:2] for track in model.tracks]  # every point seen in two photos at most
+    read = read_model(write_text(model, tmp_path / "m"))
+    assert depth_bounds(read) == depth_bounds(read, min_track_length=1)
 
 
 def test_images_that_observe_no_point_have_no_depth_bounds(tmp_path: Path) -> None:

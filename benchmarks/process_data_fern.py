@@ -45,15 +45,14 @@ def train_seeds(fern: Path, scene: Path, work: Path, lpips: Path) -> dict[str, d
         metrics = harness.evaluate(run_dir, name, work, lpips, threads=1)
         return {"seed": seed, "scene_kind": saved.get("scene_kind", "forward-facing (llff-data)")} | metrics
 
-    jobs = [
-        (parser, data, seed) for seed in SEEDS for parser, data in (("llff-data", fern), ("nerfstudio-data", scene))
-    ]
+    data = {"llff-data": fern, "nerfstudio-data": scene}
+    jobs = [(parser, seed) for seed in SEEDS for _, parser in PARSERS]
     with ThreadPoolExecutor(2) as pool:
-        rows = list(pool.map(lambda job: one(*job), jobs))
+        rows = list(pool.map(lambda job: one(job[0], data[job[0]], job[1]), jobs))
+    runs = {parser: [row for (p, _), row in zip(jobs, rows, strict=True) if p == parser] for parser in data}
     return {
-        parser: {"train_view_ids": views, "scene_kind": runs[0]["scene_kind"], "runs": runs}
-        for _, parser in PARSERS
-        for runs in [[r for (p, _, _), r in zip(jobs, rows, strict=True) if p == parser]]
+        parser: {"train_view_ids": views, "scene_kind": parsed[0]["scene_kind"], "runs": parsed}
+        for parser, parsed in runs.items()
     }
 
 

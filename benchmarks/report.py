@@ -32,6 +32,11 @@ def val_cell(rows: list[dict], seeds: Sequence[int]) -> str:
     return first
 
 
+def val_test(row: dict) -> str:
+    """A row's val and test PSNR, as the tables below set them side by side."""
+    return f"{row['val_psnr']:.2f} / {row['psnr']:.2f}"
+
+
 def curve_table(results: dict[str, dict], suite: harness.Suite = SUITE) -> list[str]:
     """Val and test PSNR along each curve run, next to the 800-iteration run of its setting (the rule's at 800)."""
     pairs = {(m, r["at_3000"]): r["at_800"] for m, r in suite.rule_along_the_budget.items()}
@@ -44,7 +49,7 @@ def curve_table(results: dict[str, dict], suite: harness.Suite = SUITE) -> list[
         setting = r["setting"] if r["setting"] in groups else pairs.get((r["method"], r["setting"]), "")
         short = [x for x in groups.get(setting, []) if x["seed"] == r["seed"]]
         steps = " · ".join(f"{int(step)}: {val:.2f} / {test:.2f}" for step, val, test in r["curve"])
-        against = f"{short[0]['val_psnr']:.2f} / {short[0]['psnr']:.2f}" if short else "—"
+        against = val_test(short[0]) if short else "—"
         if short and setting != r["setting"]:
             against += f" (`{setting}`)"
         lines.append(f"| {r['scene']} | {r['method']} | `{r['setting']}` | {against} | {steps} |")
@@ -106,8 +111,7 @@ def targets_table(results: dict[str, dict], suite: harness.Suite = SUITE) -> lis
             continue
         own, baseline = (float(np.mean(list(test[m].values()))) for m in (F, T))
         lead = own - baseline
-        shared = [seed for seed in suite.seeds if seed in test[F] and seed in test[T]]
-        per_seed = ", ".join(f"{test[F][s] - test[T][s]:+.2f}" for s in shared)
+        per_seed = ", ".join(f"{test[F][s] - test[T][s]:+.2f}" for s in suite.seeds if s in test[F] and s in test[T])
         floor = t.get("floor")
         short = [f"lead by {t['lead'] - lead:.2f}"] if lead < t["lead"] else []
         if floor is not None and own < floor:
@@ -137,15 +141,11 @@ def later_seeds_table(results: dict[str, dict], repeats: Sequence[dict], suite: 
             groups.setdefault(group, {})[r["seed"]] = r
     lines = []
     for (scene, protocol, method, setting, note), by_seed in sorted(groups.items()):
-        if set(by_seed) != set(later):
-            continue
-        rows = [by_seed[seed] for seed in later]
-        cells = " | ".join(f"{r['val_psnr']:.2f} / {r['psnr']:.2f}" for r in rows)
-        val, test = (np.mean([r[k] for r in rows]) for k in ("val_psnr", "psnr"))
-        lines.append(
-            f"| {scene} | {protocol} | {method} | `{setting}`{f' ({note})' if note else ''} | {cells} "
-            f"| {val:.2f} / {test:.2f} |"
-        )
+        if set(by_seed) == set(later):
+            rows = [by_seed[seed] for seed in later]
+            mean = {k: np.mean([r[k] for r in rows]) for k in ("val_psnr", "psnr")}
+            named = f"`{setting}`" + (f" ({note})" if note else "")
+            lines.append(harness.md_row([scene, protocol, method, named, *map(val_test, [*rows, mean])]))
     return harness.titled_table(
         f"Settings run on seeds {', '.join(map(str, later))} on a GPU (an H100, several runs at once), beside "
         "their other runs: `-plain` is TensoRF's ReLU for the density, `-revive1` revives every dark batch (the "
@@ -169,14 +169,12 @@ def threads_cell(rows: Iterable[dict]) -> str:
 def cpu_reruns_table(results: dict[str, dict], repeats: Sequence[dict]) -> list[str]:
     """Every CPU run of a key that ran twice, beside the row the report reads: the spread a difference must clear."""
     lines = []
-    for other in sorted((r for r in repeats if r.get("device") == "cpu" and r["key"] in results),
-                        key=lambda r: r["key"]):  # fmt: skip
+    others = [r for r in repeats if r.get("device") == "cpu" and r["key"] in results]
+    for other in sorted(others, key=lambda r: r["key"]):
         kept = results[other["key"]]
-        cells = [f"{r['val_psnr']:.2f} / {r['psnr']:.2f} ({threads_cell([r])})" for r in (kept, other)]
-        lines.append(
-            f"| {kept['scene']} | {kept['protocol']} | {kept['method']} | `{kept['setting']}` | "
-            f"{kept['seed']} | {cells[0]} | {cells[1]} | {other['repeat']} |"
-        )
+        cells = [f"{val_test(r)} ({threads_cell([r])})" for r in (kept, other)]
+        named = [kept["scene"], kept["protocol"], kept["method"], f"`{kept['setting']}`", kept["seed"]]
+        lines.append(harness.md_row([*named, *cells, other["repeat"]]))
     return harness.titled_table(
         "CPU runs of one setting and seed run twice: the row the tables above read and the other run (`repeats.jsonl`"
         "), val / test PSNR (CPU threads; ? = not recorded). Only a one-thread CPU run is bit-reproducible.",
@@ -226,7 +224,7 @@ def quality_section(results: dict[str, dict], repeats: Sequence[dict], suite: ha
         for p in suite.protocols.values()
     ]
     body += [*harness.table(["protocol", "iterations", "rays", "grid", "lego image", "fern image"], protocols), ""]
-    summary: list[str] = []
+    chosen: list[str] = []
     sweeps: list[str] = []
     for scene in suite.settings:
         for p in suite.protocols:
@@ -236,20 +234,18 @@ def quality_section(results: dict[str, dict], repeats: Sequence[dict], suite: ha
             picked = {m: harness.chosen_setting(tables[m], seeds) for m in (F, T)}
             rows = {m: tables[m][picked[m]] for m in (F, T)}
             test = {m: [r["psnr"] for r in rows[m]] for m in (F, T)}
-            device = "/".join(sorted({r["device"] for m in (F, T) for r in rows[m]}))
+            both = rows[F] + rows[T]
+            device = "/".join(sorted({r["device"] for r in both}))
             cells = [f"`{picked[m]}`, {harness.fmt(test[m], 2)} ({len(test[m])})" for m in (F, T)]
-            gap = np.mean(test[F]) - np.mean(test[T])
-            summary.append(
-                f"| {scene} | {p} | {device} | {cells[0]} | {cells[1]} | **{gap:+.2f}** | "
-                f"{threads_cell(r for m in (F, T) for r in rows[m])} | {comparable_seconds(rows)} |"
-            )
+            gap = f"**{np.mean(test[F]) - np.mean(test[T]):+.2f}**"
+            chosen.append(harness.md_row([scene, p, device, *cells, gap, threads_cell(both), comparable_seconds(rows)]))
             for s in suite.settings[scene]:
                 vals = [val_cell(tables[m][s], seeds) if s in tables[m] else "—" for m in (F, T)]
                 if vals != ["—", "—"]:
-                    sweeps.append(f"| {scene} | {p} | {s} | " + " | ".join(vals) + " |")
+                    sweeps.append(harness.md_row([scene, p, s, *vals]))
     picks = [f"{m}: setting, test PSNR (seeds)" for m in (F, T)]
     head = ["scene", "protocol", "device", *picks, "gap", "CPU threads", "train s (f / t)"]
-    body += [*harness.table(head, summary), ""]
+    body += [*harness.table(head, chosen), ""]
     body += targets_table(results, suite)
     body += mid_along_the_budget(results, suite)
     body += rule_along_the_budget(results, suite)
@@ -437,12 +433,9 @@ def figure(rows: Sequence[dict], suite: harness.Suite) -> str:
     """Test PSNR against training time (log axis), one panel a scene, one polyline a method with trained points."""
     scenes, methods = list(suite.equal_time["scenes"]), methods_of(rows, suite)
     width, height, left, top, plot_w, plot_h = 460, 330, 60, 30, 370, 240
-    total_w = width * len(scenes)
-    out = [
-        f'<svg xmlns="http://www.w3.org/2000/svg" width="{total_w}" height="{height + 24 * len(methods) + 10}" '
-        'font-family="sans-serif" font-size="12">',
-        f'<rect width="{total_w}" height="{height + 24 * len(methods) + 10}" fill="white"/>',
-    ]
+    size = f'width="{width * len(scenes)}" height="{height + 24 * len(methods) + 10}"'
+    svg = f'<svg xmlns="http://www.w3.org/2000/svg" {size} font-family="sans-serif" font-size="12">'
+    out = [svg, f'<rect {size} fill="white"/>']
     for k, scene in enumerate(scenes):
         x0, lines = k * width + left, {m: timed(rows, scene, m) for m in methods}
         points = [r for found in lines.values() for r in found]

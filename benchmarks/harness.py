@@ -170,7 +170,6 @@ def train_and_eval(
     parser_args: Sequence[str],
     work: Path,
     lpips: Path,
-    scene: str,
     extra: Sequence[str] = (),
     threads: int | None = None,
 ) -> dict:
@@ -182,7 +181,7 @@ def train_and_eval(
     train_log = work / f"{run.key}.train.log"
     cmd = train_command(run, data, out_dir, parser_args, extra, threads)
     train_s, train_rss = run_checked(cmd, train_log, "training")
-    run_dir = next(out_dir.glob(f"*/{run.method}/{run.key}"), out_dir / scene / run.method / run.key)
+    run_dir = run_dir_in(out_dir, run.method, run.key)
     views = json.loads((run_dir / "views.json").read_text())
     row = {
         "key": run.key, "method": run.method, "iters": run.iters, "seed": run.seed, "views": run.views,
@@ -367,7 +366,6 @@ def cpu_and_cores() -> str:
 
 # The suite: methods × scenes × protocols × settings × seeds, read from suite.toml.
 
-SUITE_FILE = Path(__file__).with_name("suite.toml")
 QUALITY_RESULTS = REPO / "benchmarks" / "results" / "quality" / "results.jsonl"
 EQUAL_TIME_RESULTS = REPO / "benchmarks" / "results" / "equal_time" / "results.jsonl"
 EQUAL_ITERATIONS_RESULTS = REPO / "benchmarks" / "results" / "equal_iterations" / "results.jsonl"
@@ -408,8 +406,8 @@ class Suite:
         return args
 
 
-def load_suite(path: Path = SUITE_FILE) -> Suite:
-    data = tomllib.loads(path.read_text())
+def load_suite() -> Suite:
+    data = tomllib.loads(Path(__file__).with_name("suite.toml").read_text())
     protocols = {name: Protocol(name, **p | {"grid": tuple(p["grid"])}) for name, p in data["protocols"].items()}
     settings = {scene: tuple(names) for scene, names in data["settings"].items()}
     return Suite(**data | {"protocols": protocols, "settings": settings})
@@ -510,6 +508,5 @@ def chosen_setting(groups: dict[str, list[dict]], seeds: Sequence[int]) -> str |
     seeded = {s: vals for s, rows in groups.items() if len(vals := val_by_seed(rows, seeds)) == len(seeds)}
     if seeded:
         return max(seeded, key=lambda s: float(np.mean(list(seeded[s].values()))))
-    first = {s: [r for r in rows if r["seed"] == seeds[0]] for s, rows in groups.items()}
-    scored = {s: rows[0]["val_psnr"] for s, rows in first.items() if rows}
-    return max(scored, key=scored.__getitem__) if scored else None
+    first = {s: vals[seeds[0]] for s, rows in groups.items() if (vals := val_by_seed(rows, seeds[:1]))}
+    return max(first, key=first.__getitem__) if first else None

@@ -40,28 +40,20 @@ def execute(point: Point, args: argparse.Namespace, suite: harness.Suite = SUITE
         extra += ["--steps-per-save", str(every), "--keep-checkpoints", str(run.iters // every + 1)]
     data = args.data / suite.scenes[scene]["path"]
     lpips, work = args.lpips, args.work / scene
-    row = harness.train_and_eval(run, data, suite.parser_args(scene, protocol), work, lpips, scene, extra, args.threads)
-    row |= harness.evaluate(Path(row["run_dir"]), run.key, work, lpips, split="val", threads=args.threads)
-    if args.stage == "curve":
-        row["curve"] = [
-            *curve_points(Path(row["run_dir"]), run, work, lpips, args.threads),
-            [run.iters, row["val_psnr"], row["psnr"]],
-        ]
+    row = harness.train_and_eval(run, data, suite.parser_args(scene, protocol), work, lpips, extra, args.threads)
+    run_dir = Path(row["run_dir"])
+    row |= harness.evaluate(run_dir, run.key, work, lpips, split="val", threads=args.threads)
+    if args.stage == "curve":  # [step, val PSNR, test PSNR] of every checkpoint before the last, then the row's own
+        row["curve"] = []
+        for ckpt in sorted((run_dir / "checkpoints").glob("step-*.ckpt")):
+            step = int(ckpt.stem.split("-")[-1])
+            if step < run.iters:
+                key = f"{run.key}.step{step}"
+                val = harness.evaluate(run_dir, key, work, lpips, split="val", checkpoint=ckpt, threads=args.threads)
+                test = harness.evaluate(run_dir, key, work, lpips, checkpoint=ckpt, threads=args.threads)
+                row["curve"].append([step, val["val_psnr"], test["psnr"]])
+        row["curve"].append([run.iters, row["val_psnr"], row["psnr"]])
     return row | {"scene": scene, "protocol": protocol, "setting": setting, "device": args.device}
-
-
-def curve_points(run_dir: Path, run: harness.Run, work: Path, lpips: Path, threads: int | None) -> list[list[float]]:
-    """[step, val PSNR, test PSNR] of every checkpoint before the last (the row itself holds the last)."""
-    points = []
-    for ckpt in sorted((run_dir / "checkpoints").glob("step-*.ckpt")):
-        step = int(ckpt.stem.split("-")[-1])
-        if step >= run.iters:
-            continue
-        key = f"{run.key}.step{step}"
-        val = harness.evaluate(run_dir, key, work, lpips, split="val", checkpoint=ckpt, threads=threads)["val_psnr"]
-        test = harness.evaluate(run_dir, key, work, lpips, checkpoint=ckpt, threads=threads)["psnr"]
-        points.append([step, val, test])
-    return points
 
 
 def quality_job(point: Point, args: argparse.Namespace) -> harness.Job:
@@ -150,9 +142,7 @@ def execute_timed(point: TimedPoint, suite: harness.Suite, data: Path, work: Pat
         "threads": THREADS, "jobs": jobs, "machine": harness.cpu_and_cores(),
     }  # fmt: skip
     try:
-        trained = harness.train_and_eval(
-            run, scene_data, parser, scene_work, lpips, point.scene, flags, threads=THREADS
-        )
+        trained = harness.train_and_eval(run, scene_data, parser, scene_work, lpips, flags, threads=THREADS)
     except RuntimeError:
         if (message := too_short(scene_work / f"{run.key}.train.log")) is None:
             raise

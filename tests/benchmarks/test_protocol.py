@@ -43,8 +43,7 @@ def _threads(cmd: list[str]) -> str | None:
 
 def test_threads_reach_the_training_and_every_evaluation(commands: list[list[str]], tmp_path: Path) -> None:
     run = protocol.Run("fourierf-vm", 10, 1, "tiny")
-    row = protocol.train_and_eval(run, tmp_path / "data", ["blender-data"], tmp_path, tmp_path / "w.pth", "lego",
-                                  threads=1)  # fmt: skip
+    row = protocol.train_and_eval(run, tmp_path / "data", ["blender-data"], tmp_path, tmp_path / "w.pth", threads=1)
     row |= protocol.evaluate(Path(row["run_dir"]), run.key, tmp_path, tmp_path / "w.pth", split="val", threads=1)
     assert [_threads(c) for c in commands] == ["1", "1", "1"]
     assert (row["psnr"], row["val_psnr"], row["val_view_ids"]) == (20.0, 20.0, [2, 3])
@@ -54,7 +53,7 @@ def test_threads_reach_the_training_and_every_evaluation(commands: list[list[str
 
 def test_without_threads_no_flag_is_passed(commands: list[list[str]], tmp_path: Path) -> None:
     run = protocol.Run("tensorf-vm", 10, 1, "tiny")
-    row = protocol.train_and_eval(run, tmp_path / "data", ["blender-data"], tmp_path, tmp_path / "w.pth", "lego")
+    row = protocol.train_and_eval(run, tmp_path / "data", ["blender-data"], tmp_path, tmp_path / "w.pth")
     assert [_threads(c) for c in commands] == [None, None]
     assert row["train_threads"] == 2  # what the trainer reported, not what was asked
 

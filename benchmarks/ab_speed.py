@@ -73,8 +73,7 @@ def git(*args: str) -> str:
 
 def export_tree(rev: str | None, where: Path) -> Path:
     """The package of ``rev`` (None: the working tree, as it is now) laid out as installed, under ``where``."""
-    if where.exists():
-        shutil.rmtree(where)
+    shutil.rmtree(where, ignore_errors=True)
     where.mkdir(parents=True)
     if rev is None:
         for name in git("ls-files", "--cached", "--others", "--exclude-standard", *SOURCES).split():

@@ -16,6 +16,7 @@ import harness
 PAPER = {"lego": 22.41, "fern": 20.97}
 SIZES = ["--max-num-iterations", "10000", *harness.size_flags(4096, (128, 300))]
 TINY = ["--max-num-iterations", "20", "--log-every", "5", *harness.size_flags(256, (16, 24))]
+DIGITS = {"train_seconds": 0, "final_s_per_it": 3, "peak_gpu_gb": 2, "psnr": 2, "paper_psnr": 2, "ssim": 3, "lpips": 3}
 
 
 def protocols(shared: Path, tiny: bool) -> dict[str, tuple[Path, list[str]]]:
@@ -50,21 +51,13 @@ def run(name: str, scene: Path, parser: list[str], args: argparse.Namespace) -> 
 
 
 def section(rows: list[dict]) -> list[str]:
-    def num(value: float | None, fmt: str) -> str:
-        return "—" if value is None else format(value, fmt)
-
-    lines = [
-        *harness.section_head("The paper's protocols on a GPU", "python benchmarks/gpu_protocol.py"),
-        "| protocol | device | train s | final-phase s/it | peak GPU GB | PSNR | paper PSNR | SSIM | LPIPS |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in rows:
-        lines.append(
-            f"| {r['protocol']}{' (tiny)' if r['tiny'] else ''} | {r['device']} | {num(r['train_seconds'], '.0f')} | "
-            f"{num(r['final_s_per_it'], '.3f')} | {num(r['peak_gpu_gb'], '.2f')} | {r['psnr']:.2f} | "
-            f"{num(r['paper_psnr'], '.2f')} | {r['ssim']:.3f} | {num(r['lpips'], '.3f')} |"
-        )
-    return lines
+    lines = harness.section_head("The paper's protocols on a GPU", "python benchmarks/gpu_protocol.py")
+    head = ["protocol", "device", "train s", "final-phase s/it", "peak GPU GB", "PSNR", "paper PSNR", "SSIM", "LPIPS"]
+    cells = []
+    for r in rows:  # a value not measured (a CPU run's GPU memory, the paper's PSNR of a tiny run) is a dash
+        measured = ["—" if r[k] is None else f"{r[k]:.{d}f}" for k, d in DIGITS.items()]
+        cells.append(harness.md_row([r["protocol"] + (" (tiny)" if r["tiny"] else ""), r["device"], *measured]))
+    return lines + harness.table(head, cells)
 
 
 def main() -> None:

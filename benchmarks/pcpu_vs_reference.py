@@ -70,7 +70,7 @@ def section(rows: list[dict]) -> list[str]:
         "per-run × | ref PSNR | ours PSNR | Δ dB | ref / ours peak RSS GB |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    ratios: dict[str, list[float]] = {"quality": [], "iteration": [], "run": [], "psnr": []}
+    pairs: list[dict[str, float | None]] = []  # per pair: the ratios and the PSNR difference
     for r in rows:
         ref, ours = r["reference"], r["ours"]
         curve = ours["psnr_curve"]  # training seconds at the first evaluated step reaching the reference's PSNR:
@@ -79,16 +79,14 @@ def section(rows: list[dict]) -> list[str]:
         iteration = ref["final_phase_s_per_it"] / ours["final_phase_s_per_it"]
         run = ref["train_wall_s"] / ours["train_wall_s"]
         delta = ours["test_psnr"] - ref["test_psnr"]
-        for key, value in (("quality", quality), ("iteration", iteration), ("run", run), ("psnr", delta)):
-            if value is not None:
-                ratios[key].append(value)
+        pairs.append({"quality": quality, "iteration": iteration, "run": run, "psnr": delta})
         lines.append(
             f"| {r['seed']} | {ref['train_wall_s']:.0f} | {ours['train_wall_s']:.0f} | "
             f"{'never' if reach is None else f'{reach:.0f}'} | {'—' if quality is None else f'{quality:.2f}'} | "
             f"{iteration:.2f} | {run:.2f} | {ref['test_psnr']:.2f} | {ours['test_psnr']:.2f} | {delta:+.2f} | "
             f"{ref['peak_rss_gb']:.2f} / {ours['peak_rss_gb']:.2f} |"
         )
-    med = {k: statistics.median(v) for k, v in ratios.items() if v}
+    med = {k: statistics.median(v) for k in pairs[0] if (v := [p[k] for p in pairs if p[k] is not None])}
     return [
         *lines,
         "",

@@ -27,15 +27,10 @@ TRAIN_TOLERANCE_DB = 0.5  # the processed capture's mean test PSNR may trail fer
 PARSERS = (("fern's poses_bounds.npy", "llff-data"), ("process-data", "nerfstudio-data"))
 
 
-def train_view_ids(fern: Path) -> list[int]:
-    """The views ``llff-data --num-views 3`` trains on: both parsers train on these."""
-    return list(LLFFDataParserConfig(data=fern, num_views=VIEWS).setup().get_outputs("train").view_ids)
-
-
 def train_seeds(fern: Path, scene: Path, work: Path, lpips: Path) -> dict[str, dict]:
     """The default run on the same views through fern's poses and the processed capture, one per seed (two at a
     time, one thread each): each seed's test metrics, the views and the scene kind the run printed."""
-    views = train_view_ids(fern)
+    views = list(LLFFDataParserConfig(data=fern, num_views=VIEWS).setup().get_outputs("train").view_ids)
 
     def one(parser: str, data: Path, seed: int) -> dict:
         name = f"{parser}-{seed}"
@@ -67,6 +62,13 @@ def trail(training: dict) -> float:
 
 def section(result: dict) -> list[str]:
     r = result
+    trainings = []  # one table row per parser
+    for poses, parser in PARSERS:
+        t = r["training"][parser]
+        metrics = [harness.fmt([run[k] for run in t["runs"]], d) for k, d in METRIC_DIGITS]
+        views = ", ".join(map(str, t["train_view_ids"]))
+        psnrs = ", ".join(f"{run['psnr']:.2f}" for run in t["runs"])
+        trainings.append(harness.md_row([poses, f"`{parser}`", t["scene_kind"], views, *metrics, psnrs]))
     return [
         *harness.section_head(
             "Structure from motion on fern's 20 photos (fourierf-process-data images)",
@@ -86,21 +88,7 @@ def section(result: dict) -> list[str]:
         "one's every-8th test views; mean ± standard deviation over the seeds, then each seed's test PSNR:",
         "",
         *harness.table(
-            ("poses", "parser", "scene kind", "train views", "test PSNR", "SSIM", "LPIPS", "PSNR by seed"),
-            (
-                harness.md_row(
-                    (
-                        poses,
-                        f"`{parser}`",
-                        t["scene_kind"],
-                        ", ".join(map(str, t["train_view_ids"])),
-                        *(harness.fmt([run[k] for run in t["runs"]], d) for k, d in METRIC_DIGITS),
-                        ", ".join(f"{run['psnr']:.2f}" for run in t["runs"]),
-                    )
-                )
-                for poses, parser in PARSERS
-                for t in [r["training"][parser]]
-            ),
+            ("poses", "parser", "scene kind", "train views", "test PSNR", "SSIM", "LPIPS", "PSNR by seed"), trainings
         ),
         "",
         f"process-data's capture trails fern's poses by {trail(r['training']):.2f} dB of mean test PSNR "

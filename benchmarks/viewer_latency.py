@@ -16,7 +16,7 @@ import subprocess
 import sys
 import time
 import urllib.request
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -205,14 +205,6 @@ def page_up(url: str) -> bool:
     return True
 
 
-def viewer_seconds(log: Path) -> float:
-    """The seconds the live viewer says its snapshots, pictures and meshes took from the training (its last line)."""
-    found = VIEWER_SHARE.findall(log.read_text())
-    if not found:
-        raise RuntimeError(f"{log} has no 'live viewer: ...' line")
-    return float(found[-1])
-
-
 def measure_slowdown(data: Path, work: Path, rounds: int, iters: int) -> dict:
     """Interleaved rounds of the arms, the order rotating; training seconds of each, whole and from ``STEADY_FROM``."""
     runs: dict[str, list[dict[str, float]]] = {arm: [] for arm in ARMS}  # per arm, one row a training
@@ -229,8 +221,10 @@ def measure_slowdown(data: Path, work: Path, rounds: int, iters: int) -> dict:
             run["browser_cpu"] = train_with_browser(cmd, port, log)
         records = harness.read_jsonl(harness.run_dir_in(out, "fourierf-vm", stamp) / "metrics.jsonl", torn=True)
         run["seconds"] = float(harness.done_record(records)["train_seconds"])  # type: ignore[index]
-        if arm == "viewer":
-            run["own_share"] = viewer_seconds(log) / run["seconds"]
+        if arm == "viewer":  # its snapshots, pictures and meshes: the seconds its last report in the log gives
+            if not (reported := VIEWER_SHARE.findall(log.read_text())):
+                raise RuntimeError(f"{log} has no 'live viewer: ...' line")
+            run["own_share"] = float(reported[-1]) / run["seconds"]
         elapsed = harness.elapsed_by_step(records)
         if STEADY_FROM not in elapsed:
             raise RuntimeError(f"{stamp}: metrics.jsonl logs no step {STEADY_FROM}; log every 50 steps")
@@ -339,7 +333,7 @@ def section(latency: dict, final: dict, ab: dict, command: str, iters: int, roun
     ]
 
 
-def main(argv: Sequence[str] | None = None) -> None:
+def main() -> None:
     ap = harness.arguments(__doc__, "bench_viewer")
     ap.add_argument("--run", type=Path, help="config.json of a finished P-CPU run (default: train one)")
     ap.add_argument("--moves", type=int, default=8)
@@ -347,7 +341,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--iters", type=int, default=800)
     ap.add_argument("--docs", type=Path, default=harness.REPO / "docs")
     ap.add_argument("--screenshots-only", action="store_true", help="only write the docs/ screenshots (needs --run)")
-    args = ap.parse_args(argv)
+    args = ap.parse_args()
     data = args.shared / "data" / "blender" / "lego"
     if not data.exists():
         sys.exit(f"error: {data} not found; pass --shared PATH_TO_SHARED")
@@ -372,7 +366,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     final = final_on(config, args.moves)
     print(f"final picture median {final['median']:.2f} s ({final['sizes']})", flush=True)
     ab = measure_slowdown(data, args.work, args.rounds, args.iters)
-    command = "python " + " ".join(["benchmarks/viewer_latency.py", *(argv if argv is not None else sys.argv[1:])])
+    command = " ".join(["python benchmarks/viewer_latency.py", *sys.argv[1:]])
     body = section(latency, final, ab, command, args.iters, args.rounds)
     harness.write_section(args.markdown, "viewer", "viewer_latency.py", body)
 

@@ -128,12 +128,11 @@ def time_iterations(code: Path, run_dir: Path, step: int = 700, warmup: int = 5,
 
 def summary(rows: list[dict], timings: dict[str, list[float]], meta: dict) -> list[str]:
     """The A/B as markdown: per side the medians, their new/old ratios, and each run's test PSNR."""
+    runs = {side: sorted((r for r in rows if r["side"] == side), key=lambda r: r["label"]) for side in SIDES}
 
-    def med(side: str, key: str) -> float:
-        return statistics.median(r[key] for r in rows if r["side"] == side)
-
-    def each(side: str, key: str, digits: int) -> str:
-        return " / ".join(f"{r[key]:.{digits}f}" for r in sorted(rows, key=lambda r: r["label"]) if r["side"] == side)
+    def compared(name: str, old: list[float], new: list[float], digits: int) -> str:
+        o, n = statistics.median(old), statistics.median(new)
+        return f"| {name} | {o:.{digits}f} | {n:.{digits}f} | {n / o:.2f} |"
 
     extra = [f"{side}: `{shlex.join(meta[f'{side}_flags'])}`" for side in ("old", "new") if meta.get(f"{side}_flags")]
     lines = [
@@ -150,16 +149,11 @@ def summary(rows: list[dict], timings: dict[str, list[float]], meta: dict) -> li
         ("final_s_per_it", "final-phase s/iteration (steps 601–800)", 3),
         ("render_s", "render the test views, s", 2),
     ):
-        lines.append(
-            f"| {name} ({each('old', key, digits)} · {each('new', key, digits)}) | {med('old', key):.{digits}f} | "
-            f"{med('new', key):.{digits}f} | {med('new', key) / med('old', key):.2f} |"
-        )
-    old_it, new_it = statistics.median(timings["old"]), statistics.median(timings["new"])
-    lines.append(
-        f"| s/iteration at step 700, in-process ({len(timings['old'])} alternating repeats of 40 per side) | "
-        f"{old_it:.4f} | {new_it:.4f} | {new_it / old_it:.2f} |"
-    )
-    lines.append("")
+        old, new = ([r[key] for r in runs[side]] for side in SIDES)
+        each = " · ".join(" / ".join(f"{v:.{digits}f}" for v in values) for values in (old, new))
+        lines.append(compared(f"{name} ({each})", old, new, digits))
+    repeats = f"{len(timings['old'])} alternating repeats of 40 per side"
+    lines += [compared(f"s/iteration at step 700, in-process ({repeats})", timings["old"], timings["new"], 4), ""]
     for side in SIDES:
         psnrs = [f"{r['psnr']:.2f} (seed {r['seed']})" for r in rows if r["side"] == side]
         lines.append(f"- test PSNR {side}: " + ", ".join(psnrs))

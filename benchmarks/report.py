@@ -526,12 +526,10 @@ def equal_iterations_section(rows: Sequence[dict], suite: harness.Suite) -> list
         f"Each point is a user's run at {stage['budget'].removesuffix('it')} iterations: `fourierf-train METHOD "
         "--max-num-iterations N --threads 1` with no size flag (sized as the default CPU run, the short-run rules "
         f"applying as they would), then `fourierf-eval` on the test views; lego at {side}×{side}. {NO_ALPHA} is "
-        "zerorf-vm with `--pipeline.model.alpha-weight 0`, on lego only (fern's images carry no alpha). freenerf is "
-        "left out: at over ten seconds an iteration on this CPU, the budget takes hours; the equal-time section "
-        "covers it. A method too slow for that budget here runs a shorter one (`--budget Nit`), the iterations "
-        "column saying which; each derived line compares rows of equal iterations only. Training seconds come from "
-        "a shared, loaded machine (other work ran beside these points); the equal-time section has the "
-        "quiet-machine speeds.",
+        "zerorf-vm with `--pipeline.model.alpha-weight 0`, on lego only (fern's images carry no alpha). A method "
+        "too slow for that budget here runs a shorter one (`--budget Nit`), the iterations column saying which; "
+        "each derived line compares rows of equal iterations only. Training seconds come from a shared, loaded "
+        "machine (other work ran beside these points); the equal-time section has the quiet-machine speeds.",
     )
     if not rows:
         return [*body, "No points are recorded yet.", ""]

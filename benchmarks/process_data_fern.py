@@ -41,10 +41,10 @@ def train_seeds(fern: Path, scene: Path, work: Path, lpips: Path) -> dict[str, d
         return {"seed": seed, "scene_kind": saved.get("scene_kind", "forward-facing (llff-data)")} | metrics
 
     data = {"llff-data": fern, "nerfstudio-data": scene}
-    jobs = [(parser, seed) for seed in SEEDS for _, parser in PARSERS]
+    jobs = [(parser, data[parser], seed) for seed in SEEDS for _, parser in PARSERS]
     with ThreadPoolExecutor(2) as pool:
-        rows = list(pool.map(lambda job: one(job[0], data[job[0]], job[1]), jobs))
-    runs = {parser: [row for (p, _), row in zip(jobs, rows, strict=True) if p == parser] for parser in data}
+        rows = list(pool.map(lambda job: one(*job), jobs))
+    runs = {parser: [row for (p, _, _), row in zip(jobs, rows, strict=True) if p == parser] for parser in data}
     return {
         parser: {"train_view_ids": views, "scene_kind": parsed[0]["scene_kind"], "runs": parsed}
         for parser, parsed in runs.items()

@@ -202,10 +202,7 @@ def train_command(
 
 def threads_used(train_log: Path) -> int | None:
     """The CPU thread count the trainer reported in its log (None: not found): only one thread is reproducible."""
-    try:
-        found = CPU_THREADS_NOTE.search(train_log.read_text(errors="replace"))
-    except OSError:
-        return None
+    found = CPU_THREADS_NOTE.search(train_log.read_text(errors="replace")) if train_log.is_file() else None
     return int(found.group(1)) if found else None
 
 
@@ -356,19 +353,15 @@ def machine_description() -> str:
 
 
 def cpu_and_cores() -> str:
-    try:
-        lines = Path("/proc/cpuinfo").read_text().splitlines()
-    except OSError:
-        lines = []
+    cpuinfo = Path("/proc/cpuinfo")
+    lines = cpuinfo.read_text().splitlines() if cpuinfo.is_file() else []
     models = [line.split(":", 1)[1].strip() for line in lines if line.startswith("model name")]
     return f"{models[0] if models else platform.processor() or platform.machine()}, {os.cpu_count()} cores"
 
 
 # The suite: methods × scenes × protocols × settings × seeds, read from suite.toml.
 
-QUALITY_RESULTS = REPO / "benchmarks" / "results" / "quality" / "results.jsonl"
-EQUAL_TIME_RESULTS = REPO / "benchmarks" / "results" / "equal_time" / "results.jsonl"
-EQUAL_ITERATIONS_RESULTS = REPO / "benchmarks" / "results" / "equal_iterations" / "results.jsonl"
+RESULTS = REPO / "benchmarks" / "results"  # each family's committed rows: <family>/results.jsonl
 REPEATS = "repeats.jsonl"  # beside the results: earlier rows of keys run again, each with its ``repeat`` note
 
 

@@ -7,8 +7,6 @@ the default fourierf-vm run on 3 views through the processed capture beside the 
 from __future__ import annotations
 
 import json
-import os
-import platform
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -112,14 +110,12 @@ def main() -> dict:
         "total": report.total,
         "unregistered": report.unregistered,
         "mean_reprojection_error_px": report.mean_reprojection_error,
-        "rotation_deg_median": float(np.median(errors.rotation_deg)),
-        "rotation_deg_max": float(np.max(errors.rotation_deg)),
-        "centre_percent_median": float(np.median(errors.centre_error_percent)),
-        "centre_percent_max": float(np.max(errors.centre_error_percent)),
         "reference_extent": errors.reference_extent,
         "wall_seconds": wall,
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+        "machine": harness.cpu_and_cores(),
     }
+    for name, values in (("rotation_deg", errors.rotation_deg), ("centre_percent", errors.centre_error_percent)):
+        result |= {f"{name}_median": float(np.median(values)), f"{name}_max": float(np.max(values))}
     result["passed"] = {
         key: result[key] >= target if key == "registered" else result[key] <= target for key, target in TARGETS.items()
     }

@@ -160,10 +160,8 @@ def later_seeds_table(results: dict[str, dict], repeats: Sequence[dict], suite: 
 
 def threads_cell(rows: Iterable[dict]) -> str:
     """The CPU threads the rows trained on (``?``: not recorded; ``—``: none ran on a CPU)."""
-    cpu = [r for r in rows if r.get("device") == "cpu"]
-    if not cpu:
-        return "—"
-    return " / ".join(sorted({str(r.get("train_threads") or "?") for r in cpu}))
+    threads = sorted({str(r.get("train_threads") or "?") for r in rows if r.get("device") == "cpu"})
+    return " / ".join(threads) or "—"
 
 
 def cpu_reruns_table(results: dict[str, dict], repeats: Sequence[dict]) -> list[str]:
@@ -542,21 +540,20 @@ def equal_iterations_section(rows: Sequence[dict], suite: harness.Suite) -> list
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--results", type=Path, default=harness.QUALITY_RESULTS, help="the rows run.py recorded")
-    ap.add_argument("--equal-time", type=Path, default=harness.EQUAL_TIME_RESULTS, help="the equal-time stage's rows")
-    ap.add_argument("--equal-iterations", type=Path, default=harness.EQUAL_ITERATIONS_RESULTS, help="that stage's rows")
     ap.add_argument("--markdown", type=Path, default=harness.REPO / "BENCHMARKS.md")
-    ap.add_argument("--figure", type=Path, default=harness.REPO / FIGURE, help="the equal-time figure (SVG)")
     args = ap.parse_args()
-    timed_rows, counted_rows = ([*harness.load_results(p).values()] for p in (args.equal_time, args.equal_iterations))
-    repeats = harness.read_jsonl(args.results.with_name(harness.REPEATS))
+    quality, timed_rows, counted_rows = (
+        harness.load_results(harness.RESULTS / family / "results.jsonl")
+        for family in ("quality", "equal_time", "equal_iterations")
+    )
+    repeats = harness.read_jsonl(harness.RESULTS / "quality" / harness.REPEATS)
     for name, body in (
-        ("quality", quality_section(harness.load_results(args.results), repeats)),
-        ("equal-time", equal_time_section(timed_rows, SUITE)),
-        ("equal-iterations", equal_iterations_section(counted_rows, SUITE)),
+        ("quality", quality_section(quality, repeats)),
+        ("equal-time", equal_time_section([*timed_rows.values()], SUITE)),
+        ("equal-iterations", equal_iterations_section([*counted_rows.values()], SUITE)),
     ):
         harness.write_section(args.markdown, name, "report.py", body)
-    args.figure.write_text(figure(timed_rows, SUITE))
+    (harness.REPO / FIGURE).write_text(figure([*timed_rows.values()], SUITE))
 
 
 if __name__ == "__main__":

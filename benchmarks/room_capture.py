@@ -27,7 +27,7 @@ TARGETS = {"8": 22.0, "all": 28.0}  # test PSNR each view count should reach
 CROP_PADDING = 0.1  # the mesh is scored inside the true object's box grown by this share of its size on each side
 PICTURE_VIEWS = 2
 PICTURE = Path("docs/room_capture.png")
-RESULTS = harness.REPO / "benchmarks" / "results" / "room_capture" / "results.jsonl"
+RESULTS = harness.RESULTS / "room_capture" / "results.jsonl"
 NO_MESH = {"chamfer": None, "mesh_to_truth": None, "truth_to_mesh": None}
 
 

@@ -90,11 +90,9 @@ class TimedPoint:
         return suite.equal_time["iterations"].get("variants", {}).get(self.method, {})
 
     def run(self, suite: harness.Suite) -> harness.Run:
-        iterations, seed = budget_iterations(self.budget), suite.equal_time["seed"]
-        if iterations is None:
-            return harness.Run(self.method, 0, seed, "equal-time", self.budget)
-        method = self.variant(suite).get("method", self.method)
-        return harness.Run(method, iterations, seed, "equal-iterations", self.budget, name=self.method)
+        iterations, method = budget_iterations(self.budget), self.variant(suite).get("method", self.method)
+        views = "equal-time" if iterations is None else "equal-iterations"
+        return harness.Run(method, iterations or 0, suite.equal_time["seed"], views, self.budget, name=self.method)
 
     def train_args(self, suite: harness.Suite, data: Path, work: Path) -> TrainArgs:
         """``train_and_eval``'s run, data, parser flags, work folder and extra flags (a variant's own)."""
@@ -266,11 +264,9 @@ def parse_args(argv: Sequence[str] | None = None, suite: harness.Suite = SUITE) 
     ap.add_argument("--rows", nargs="+", type=Path, metavar="FILE", help="merge: results files written elsewhere")
     args = ap.parse_args(argv)
     stage, timed, counted = args.stage, args.stage == "equal-time", args.stage == "equal-iterations"
-    results = {"equal-time": harness.EQUAL_TIME_RESULTS, "equal-iterations": harness.EQUAL_ITERATIONS_RESULTS}
-    args.work = (
-        args.work or harness.REPO / "outputs" / f"bench_{stage.replace('-', '_') if stage in results else 'quality'}"
-    )
-    args.results = args.results or results.get(stage, harness.QUALITY_RESULTS)
+    family = stage.replace("-", "_") if timed or counted else "quality"  # the stage's results and work folders
+    args.work = args.work or harness.REPO / "outputs" / f"bench_{family}"
+    args.results = args.results or harness.RESULTS / family / "results.jsonl"
     if args.budget is not None and not (timed or counted):
         sys.exit(f"error: --budget sets the equal-time stage's budgets; drop it for the {stage} stage")
     if counted and args.budget and (len(args.budget) != 1 or not budget_iterations(args.budget[0])):

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import harness
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from fourierf_plugin.engine.trainer import TrainerConfig
 from fourierf_plugin.scripts.viewer import ViewerConfig, ViewerHandle, serve
@@ -104,17 +105,9 @@ def orbit_moves(handle: ViewerHandle, n: int) -> list[tuple[np.ndarray, np.ndarr
     """Camera positions turning about the scene's up axis through the object, 360/n degrees apart, and the target."""
     cameras = handle.run.pipeline.datamanager.reference_outputs.cameras
     layout = scene_layout(cameras)
-    start, up = camera_from_dataset(cameras, 0).camera_to_world[:, 3] - layout.target, layout.up
-    moves = []
-    for i in range(1, n + 1):
-        angle = 2 * math.pi * i / n  # Rodrigues' rotation of the start offset about ``up``
-        rotated = (
-            start * math.cos(angle)
-            + np.cross(up, start) * math.sin(angle)
-            + up * np.dot(up, start) * (1 - math.cos(angle))
-        )
-        moves.append((layout.target + rotated, layout.target))
-    return moves
+    start = camera_from_dataset(cameras, 0).camera_to_world[:, 3] - layout.target
+    turns = Rotation.from_rotvec([layout.up * 2 * math.pi * i / n for i in range(1, n + 1)])
+    return [(layout.target + offset, layout.target) for offset in turns.apply(start)]
 
 
 def timed_moves(handle: ViewerHandle, moves: int, final: bool, settle: float) -> Iterator[tuple[object, float]]:
@@ -339,7 +332,6 @@ def main() -> None:
     ap.add_argument("--moves", type=int, default=8)
     ap.add_argument("--rounds", type=int, default=2, help="rounds of the three slowdown arms")
     ap.add_argument("--iters", type=int, default=800)
-    ap.add_argument("--docs", type=Path, default=harness.REPO / "docs")
     ap.add_argument("--screenshots-only", action="store_true", help="only write the docs/ screenshots (needs --run)")
     args = ap.parse_args()
     data = args.shared / "data" / "blender" / "lego"
@@ -357,8 +349,7 @@ def main() -> None:
             harness.run_checked(pcpu_train(data, out, stamp, args.iters), args.work / "final.log", "training")
             config = harness.run_dir_in(out, "fourierf-vm", stamp) / "config.json"
     if args.screenshots_only:
-        args.docs.mkdir(parents=True, exist_ok=True)
-        for path in screenshots(config, args.docs):
+        for path in screenshots(config, harness.REPO / "docs"):
             print(f"wrote {path}")
         return
     latency = latency_on(config, args.moves)

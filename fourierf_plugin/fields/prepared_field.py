@@ -134,6 +134,32 @@ class PreparedField(nn.Module):
         finally:
             self._filtered, self._render_key = previous, previous_key
 
+    @contextmanager
+    def detached_filtering(self) -> Iterator[list[tuple[Tensor, Tensor]]]:
+        """Inside the block, lookups and regularisers read leaf copies of this iteration's filtered factors, so that
+        backward passes stop there (``pipelines.ray_chunks``); yields the (filtered factor, leaf copy) pairs whose
+        leaves' gradients the block accumulates. A grid that stands for both keeps standing for both."""
+        grids, pairs = self.filtered, []
+        copies: dict[int, FilteredFactors] = {}
+
+        def leaf(t: Tensor) -> Tensor:
+            if not t.requires_grad:
+                return t
+            pairs.append((t, t.detach().requires_grad_()))
+            return pairs[-1][1]
+
+        def detached(factors: FilteredFactors) -> FilteredFactors:
+            if id(factors) not in copies:
+                planes, lines = [leaf(t) for t in factors.planes], [leaf(t) for t in factors.lines]
+                copies[id(factors)] = FilteredFactors(planes, lines, factors.rendering)
+            return copies[id(factors)]
+
+        self._filtered = FilteredGrids(detached(grids.density), detached(grids.appearance), grids.cutoffs)
+        try:
+            yield pairs
+        finally:
+            self._filtered = grids
+
     def _parameter_versions(self) -> tuple:
         """Identity and in-place version of every parameter and buffer: any optimiser step or resize changes it."""
         return tuple((id(t), t._version) for t in (*self.parameters(), *self.buffers()))

@@ -256,8 +256,7 @@ class FourieRFModel(nn.Module):
         there would be wasted.
         """
         if background is None:
-            kind = self._background_now if self.training else self.effects.eval_background
-            background = background_color(kind, origins.shape[0], origins.device, self.generator, self.step_generator)
+            background = self.draw_background(origins.shape[0], origins.device)
         with phase("sampling"):
             samples = self.sample(origins, directions, jitter)
         with phase("density"):
@@ -288,6 +287,12 @@ class FourieRFModel(nn.Module):
                     if term is not None:
                         out[regulariser.name] = term
         return out
+
+    def draw_background(self, num_rays: int, device: torch.device | str) -> Tensor:
+        """The background of a batch of ``num_rays`` rays: this step's training one (one coin per batch, or a colour
+        per ray) in training mode, the scene's evaluation one otherwise."""
+        kind = self._background_now if self.training else self.effects.eval_background
+        return background_color(kind, num_rays, device, self.generator, self.step_generator)
 
     def colours(self, samples: RaySamples, weights: Tensor, scale: Tensor | None) -> Tensor:
         """Ray colours [R, 3] from the samples that show (``marching.shade``; a model whose density pass already

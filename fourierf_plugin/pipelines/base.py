@@ -17,6 +17,7 @@ from fourierf_plugin.data.dataparser_base import Split
 from fourierf_plugin.data.scene_effects import EffectsConfig
 from fourierf_plugin.model_components.rendering import background_color, composite_target
 from fourierf_plugin.models.fourierf import Changes, FourieRFModel, FourieRFModelConfig
+from fourierf_plugin.pipelines.ray_chunks import accumulate_in_chunks, chunk_spans, max_training_samples
 from fourierf_plugin.utils.console import get_console
 from fourierf_plugin.utils.errors import fail
 from fourierf_plugin.utils.phases import phase
@@ -73,6 +74,8 @@ class Pipeline:
             step_generator=self.step_generator,
         ).to(device)
         self._generator = generator
+        self.max_samples = max_training_samples(device)
+        """Samples one training pass evaluates at most (a larger batch is taken in chunks)."""
         # Unseen-view rays draw from a stream of their own: turning an unseen-view regulariser on changes the loss,
         # not the training batches or their jitter.
         self.unseen_generator = torch.Generator(device=self.step_generator.device).manual_seed(
@@ -85,9 +88,14 @@ class Pipeline:
         with phase("data"):
             batch = self.datamanager.next_batch(step)
         self.model.prepare(step)
-        outputs = self.model(batch.origins, batch.directions)
-        with phase("losses"):
-            loss_terms = self.model.loss_dict(outputs, batch.rgba, step)
+        spans = chunk_spans(batch.origins.shape[0], self.model.samples_per_ray(training=True), self.max_samples)
+        carrier = None
+        if len(spans) > 1:  # a batch too large for one pass (ZeroRF's later ones): its gradient chunk by chunk
+            loss_terms, carrier = accumulate_in_chunks(self.model, batch, step, spans)
+        else:
+            outputs = self.model(batch.origins, batch.directions)
+            with phase("losses"):
+                loss_terms = self.model.loss_dict(outputs, batch.rgba, step)
         for regulariser in self.model.unseen_views():
             views = regulariser.unseen
             with phase("data"):
@@ -97,6 +105,8 @@ class Pipeline:
             )
         with phase("losses"):
             loss = torch.stack(list(loss_terms.values())).sum()
+            if carrier is not None:
+                loss = loss + carrier
         metrics = {k: v.detach() for k, v in loss_terms.items()}
         metrics["loss"] = loss.detach()
         metrics["psnr"] = -10.0 * torch.log10(metrics["mse"].clamp(min=1e-10))

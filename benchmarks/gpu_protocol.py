@@ -71,7 +71,6 @@ def main() -> None:
 
         if not torch.cuda.is_available():
             sys.exit("error: no CUDA device here; run on a GPU machine (or --tiny --device cpu to check the script)")
-    args.work.mkdir(parents=True, exist_ok=True)
     rows = [run(name, scene, parser, args) for name, (scene, parser) in protocols(args.shared, args.tiny).items()]
     harness.write_jsonl(args.work / "results.jsonl", rows)
     harness.write_section(args.markdown, "gpu-protocol", "gpu_protocol.py", section(rows))

@@ -217,17 +217,10 @@ def thread_flags(threads: int | None) -> list[str]:
 
 
 def evaluate(
-    run_dir: Path,
-    key: str,
-    work: Path,
-    lpips: Path,
-    split: str = "test",
-    checkpoint: Path | None = None,
-    threads: int | None = None,
+    run_dir: Path, key: str, work: Path, lpips: Path, *flags: str, split: str = "test", threads: int | None = None
 ) -> dict:
-    """Metrics and timings of a run on one split (keys prefixed with the split but for test's), at ``checkpoint``."""
-    flags = ["--lpips-weights", str(lpips), "--split", split, *thread_flags(threads)]
-    flags += ["--checkpoint", str(checkpoint)] if checkpoint is not None else []
+    """A run's metrics and timings on one split (keys prefixed with the split but for test's); ``flags``: the eval's."""
+    flags = ("--lpips-weights", str(lpips), "--split", split, *thread_flags(threads), *flags)
     report, eval_s = eval_report(run_dir, work, key if split == "test" else f"{key}.{split}", *flags)
     metrics = {k: report["results"][k] for k in ("psnr", "ssim", "lpips")}
     if split != "test":
@@ -406,7 +399,6 @@ def load_suite() -> Suite:
     return Suite(**data | {"protocols": protocols, "settings": settings})
 
 
-RAMP = "--pipeline.model.fourier.ramp-fraction"
 F_FINAL, F_FINAL_COLOR = "--pipeline.model.fourier.f-final", "--pipeline.model.fourier.f-final-color"
 F0_DENSITY, F0_COLOR = "--pipeline.model.fourier.f0-density", "--pipeline.model.fourier.f0-color"
 FNM, FNM_FROM = "--pipeline.model.floaters-gradient-scaling", "--pipeline.model.floaters-gradient-scaling-from"
@@ -435,7 +427,7 @@ VALUED: dict[str, Callable[[str], list[str]]] = {  # a prefix and a number: ``tv
     "wd": lambda v: ["--optimizer.weight-decay", v],
     "lr": lambda v: ["--optimizer.lr-grids", v],
     "tv": lambda v: ["--pipeline.model.tv-weight-density", v, "--pipeline.model.tv-weight-appearance", v],
-    "ramp": lambda v: [RAMP, v],  # the fraction of the run over which the band opens
+    "ramp": lambda v: ["--pipeline.model.fourier.ramp-fraction", v],  # the share of the run over which the band opens
     "f": lambda v: [F0_DENSITY, v, F0_COLOR, v],  # both grids' first band
     "f0d": lambda v: [F0_DENSITY, v],
     "f0c": lambda v: [F0_COLOR, v],

@@ -18,11 +18,11 @@ import harness
 EVAL_EVERY = 80  # 10 % of the run
 
 
-def reference_run(peer: Path, seed: int, work: Path) -> dict:
+def reference_run(shared: Path, seed: int, work: Path) -> dict:
     """One reference run (its log ``work/reference-SEED.log``); the fields of its RESULT line as numbers."""
     log, env = work / f"reference-{seed}.log", dict(os.environ, PCPU_OUT=str(work / "peer-runs"))
     proc = subprocess.run(
-        ["bash", str(peer / "run_pcpu.sh"), "fourierf", str(seed)], capture_output=True, text=True, env=env
+        ["bash", str(shared / "peer" / "run_pcpu.sh"), "fourierf", str(seed)], capture_output=True, text=True, env=env
     )
     log.write_text(proc.stdout + proc.stderr)
     lines = [line for line in proc.stdout.splitlines() if line.startswith("RESULT ")]
@@ -111,9 +111,7 @@ def main() -> None:
         row: dict = {"seed": seed}
         for side in ("reference", "ours") if i % 2 == 0 else ("ours", "reference"):
             print(f"seed {seed}: {side} ...", flush=True)
-            row[side] = (
-                our_run(args.shared, seed, args.work) if side == "ours" else reference_run(peer, seed, args.work)
-            )
+            row[side] = {"ours": our_run, "reference": reference_run}[side](args.shared, seed, args.work)
         rows.append(row)
         harness.write_jsonl(results, rows)
     harness.write_section(args.markdown, "pcpu-vs-reference", "pcpu_vs_reference.py", section(rows))

@@ -104,7 +104,6 @@ def picture(rows: dict[str, dict], room: Path, work: Path, threads: int | None, 
     names = sorted(p.stem for p in (folders[METHODS[0]] / "rgb").glob("*.png"))[::3][:PICTURE_VIEWS]
     columns = [room / "images", *(folders[method] / kind for method in METHODS for kind in ("rgb", "depth"))]
     lines = [np.concatenate([iio.imread(c / f"{name}.png")[..., :3] for c in columns], axis=1) for name in names]
-    path.parent.mkdir(parents=True, exist_ok=True)
     iio.imwrite(path, np.concatenate(lines, axis=0))
 
 

@@ -48,9 +48,9 @@ def execute(point: Point, args: argparse.Namespace, suite: harness.Suite = SUITE
         for ckpt in sorted((run_dir / "checkpoints").glob("step-*.ckpt")):
             step = int(ckpt.stem.split("-")[-1])
             if step < run.iters:
-                key = f"{run.key}.step{step}"
-                val = harness.evaluate(run_dir, key, work, lpips, split="val", checkpoint=ckpt, threads=args.threads)
-                test = harness.evaluate(run_dir, key, work, lpips, checkpoint=ckpt, threads=args.threads)
+                key, at = f"{run.key}.step{step}", ("--checkpoint", str(ckpt))
+                val = harness.evaluate(run_dir, key, work, lpips, *at, split="val", threads=args.threads)
+                test = harness.evaluate(run_dir, key, work, lpips, *at, threads=args.threads)
                 row["curve"].append([step, val["val_psnr"], test["psnr"]])
         row["curve"].append([run.iters, row["val_psnr"], row["psnr"]])
     return row | {"scene": scene, "protocol": protocol, "setting": setting, "device": args.device}

@@ -4,12 +4,14 @@ The budget picks ``max_num_iterations`` before the short-run rules are applied (
 count it picks decides which rules apply, and every schedule stays a fraction of the run. The cost of an iteration
 comes from timing a few real steps of the configured pipeline on a throwaway copy (``measure_first_steps``), scaled
 to the whole run by ``estimates.run_shape``; the budget covers the training loop only (setup, this timing and
-evaluation come on top).
+evaluation come on top). Once it trains, the run plans its length again from its own speed before its first
+count-dependent event, within the counts its short-run rules cover (``LengthPlan``, ``Trainer._replan``).
 """
 
 from __future__ import annotations
 
 import copy
+import functools
 import math
 import re
 import sys
@@ -22,8 +24,8 @@ import torch
 from fourierf_plugin.engine.estimates import checkpoint_bytes, mean_rays_per_batch, run_shape, save_seconds
 from fourierf_plugin.engine.machine import pick_device, seed_everything
 from fourierf_plugin.engine.optimizers import build_optimizer
-from fourierf_plugin.engine.trainer import TrainerConfig, optimisation_step
-from fourierf_plugin.method_configs.budget import Run, rule_span
+from fourierf_plugin.engine.trainer import LengthPlan, TrainerConfig, optimisation_step
+from fourierf_plugin.method_configs.budget import AtStep, Run, rule_span, rules_for
 from fourierf_plugin.utils.console import format_duration
 from fourierf_plugin.utils.errors import fail
 
@@ -151,7 +153,8 @@ class Plan:
             f"iteration (timed over {TIMED_STEPS} steps of this run's pipeline, scaled to the whole run), so "
             f"max_num_iterations={self.iterations}, planned training time {format_duration(self.planned_s)}; the "
             f"budget covers training only: setup, this timing ({format_duration(self.calibration_s)}) and evaluation "
-            "are not included; should its iterations cost more than planned, training stops and saves at the budget"
+            "are not included; the run plans its length again from its own speed before its first event, and "
+            "should its iterations still cost more than planned, training stops and saves at the budget"
         )
 
 
@@ -204,11 +207,37 @@ def apply_time_budget(
     config: TrainerConfig, finish: Callable[[TrainerConfig], object], background: str = "white"
 ) -> list[str]:
     """Set ``config.max_num_iterations`` (and the planned seconds the trainer compares with the actual ones at the
-    end) from its ``--time-budget``; the note that says so."""
+    end, and what it plans the length again with once it trains) from its ``--time-budget``; the note that says so."""
     if config.time_budget is None:
         return []
     plan = plan_run(config, finish, background)
     config.max_num_iterations = plan.iterations
     config.planned_train_seconds = plan.planned_s
     config.train_deadline_seconds = plan.budget_s - plan.cost.seconds_per_save  # the last checkpoint inside it
+    finished = copy.deepcopy(config)
+    finish(finished)
+    low, high = _span(config, plan.iterations, background)
+    config.length_plan = LengthPlan(
+        plan.budget_s * (1.0 - MARGIN),
+        plan.cost.seconds_per_save,
+        max(low, MIN_ITERATIONS),
+        high,
+        pinned_steps(finished, background),
+    )
     return [plan.describe(config.time_budget)]
+
+
+def pinned_steps(config: TrainerConfig, background: str) -> tuple[tuple[str, int, int], ...]:
+    """The settings of ``config`` (a finished one) that a short-run rule placed at a fixed step (``AtStep``), as the
+    trainer's length plan keeps them: (config path, item of a tuple or -1, step); a value the user set is not one."""
+    if not config.budget_rule:
+        return ()
+    pins = []
+    for rule in rules_for(Run.of(config, background)):
+        resolved = rule.values(config.max_num_iterations)
+        for path, value in rule.settings.items():
+            if functools.reduce(getattr, path.split("."), config) != resolved[path]:
+                continue
+            items = enumerate(value) if isinstance(value, tuple) else [(-1, value)]
+            pins += [(path, index, item.step) for index, item in items if isinstance(item, AtStep)]
+    return tuple(pins)

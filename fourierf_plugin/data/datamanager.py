@@ -59,9 +59,14 @@ def rays_per_batch_at(
     so a resumed run draws the batches the uninterrupted one does."""
     scale = 1.0
     for fraction, multiplier in schedule or ():
-        if step >= math.floor(fraction * max_iters + 0.5):
+        if step >= stage_start(fraction, max_iters):
             scale = multiplier
     return rays_per_batch if scale == 1.0 else max(1, round(rays_per_batch * scale))
+
+
+def stage_start(fraction: float, max_iters: int) -> int:
+    """The step where a ray schedule's stage at ``fraction`` of a run of ``max_iters`` starts."""
+    return math.floor(fraction * max_iters + 0.5)
 
 
 def invalid_schedule(schedule: Sequence[Sequence[float]] | None) -> str | None:
@@ -117,7 +122,7 @@ class DataManager:
                 f"pass e.g. {SCHEDULE_FLAG} 0.0051 4 0.0101 16",
             )
         self.config = config
-        self.max_iters = max_iters  # the run's length, where the ray schedule's fractions fall
+        self.set_run_length(max_iters)  # the run's length, where the ray schedule's fractions fall
         self.device = device
         self.generator = generator  # batches are drawn where it lives (the device, for a GPU step without copies)
         self.parser = config.dataparser.setup()
@@ -161,6 +166,15 @@ class DataManager:
         """Training rays at ``step`` (``rays_per_batch``, or its multiple in the schedule's stage at ``step``)."""
         c = self.config
         return rays_per_batch_at(step, c.rays_per_batch, c.rays_per_batch_schedule, self.max_iters)
+
+    def set_run_length(self, max_iters: int) -> None:
+        """Place the ray schedule's stages at a run of ``max_iters`` iterations (``set_run_length`` of the model)."""
+        self.max_iters = max_iters
+
+    def stage_steps(self) -> list[int]:
+        """The steps where the ray schedule's stages start: the run's count-dependent events of the batch."""
+        schedule = self.config.rays_per_batch_schedule or ()
+        return [stage_start(fraction, self.max_iters) for fraction, _ in schedule]
 
     def next_batch(self, step: int = 0) -> RayBatch:
         """A batch of training rays for ``step`` (``rays_at``); a fresh permutation each epoch, the tail of an epoch

@@ -71,14 +71,23 @@ RUN_TO_GROWTH = 0.9
 the growth leaves out (the field lights up, the occupancy updates shrink the box and filter the rays), fitted on an
 object and a forward-facing scene at the CPU sizing; an estimate, which ``time_budget.MARGIN`` covers."""
 
+REST_TO_GROWTH = {"euclidean": 0.62, "ndc": 1.3, "contracted": 1.0}
+"""A run's cost per iteration after its first events over its cost before them times the grid's growth, by the
+scene's ray space: an object's box (euclidean rays) is mostly empty, and once the occupancy grid skips that space an
+iteration costs far less than the growth says; a forward-facing scene (NDC) fills its frustum, and its planes' cost
+grows faster than their side. Fitted on the bundled lego and on fern at the CPU sizing (an unbounded scene, not
+fitted, takes the growth as it is); an estimate, which ``time_budget.MARGIN`` covers."""
+
 SAVE_BYTES_PER_SECOND = 200e6
 """How fast a checkpoint is written (serialised and flushed to disk): an estimate for a local disk."""
 
 
-def grid_growth(config: Any, upto: int | None = None) -> float:
+def grid_growth(config: Any, upto: int | None = None, iterations: int | None = None) -> float:
     """The run's mean grid side over its initial one, iteration by iteration along the upsample schedule, over its
-    first ``upto`` iterations (all by default): a ray's samples, and so an iteration's cost, grow with the side."""
-    field, iterations = config.pipeline.model.field, config.max_num_iterations
+    first ``upto`` iterations (all by default), the run ``iterations`` long (default: its own count): a ray's
+    samples, and so an iteration's cost, grow with the side."""
+    field = config.pipeline.model.field
+    iterations = config.max_num_iterations if iterations is None else iterations
     end = iterations if upto is None else max(1, min(upto, iterations))
     steps = steps_from_fractions(field.upsample_fractions, iterations)
     counts = [field.n_voxels_init, *voxel_counts(field.n_voxels_init, field.n_voxels_final, len(steps))]
@@ -96,6 +105,14 @@ def fitting_iterations(config: Any, done: int, seconds: float, available_s: floa
     fewer of its upsamples than a whole run does)."""
     per_side = seconds / (done * grid_growth(config, done))
     return max(1, math.floor(available_s / (per_side * grid_growth(config))))
+
+
+def rest_seconds(config: Any, iterations: int, done: int, seconds_per_iteration: float) -> float:
+    """What iterations ``done`` to ``iterations`` of a run of ``iterations`` cost, at ``seconds_per_iteration`` timed
+    on its initial grid before any of its events (a ``--time-budget`` run's re-plan): that cost per unit of grid side,
+    times each iteration's side, times ``REST_TO_GROWTH`` of its scene."""
+    sides = iterations * grid_growth(config, iterations=iterations) - done * grid_growth(config, done, iterations)
+    return seconds_per_iteration * sides * REST_TO_GROWTH[config.pipeline.effects.ray_space]
 
 
 def run_shape(config: Any) -> float:

@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+import bisect
 import contextlib
+import copy
+import functools
+import itertools
 import json
 import math
 import os
 import signal
+import statistics
 import time
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar, Literal
@@ -21,9 +26,10 @@ from rich.markup import escape
 from fourierf_plugin import __version__
 from fourierf_plugin.accel.config import uses_gpu_paths
 from fourierf_plugin.configs.base import InstantiateConfig, save_config
+from fourierf_plugin.data.datamanager import DataManager
 from fourierf_plugin.data.dataparser_transforms import write_run_frame
 from fourierf_plugin.engine.checkpoint import list_checkpoints, load_latest_checkpoint, save_checkpoint
-from fourierf_plugin.engine.estimates import describe_cost, fitting_iterations
+from fourierf_plugin.engine.estimates import describe_cost, fitting_iterations, rest_seconds
 from fourierf_plugin.engine.health import DEAD_FIELD_FIX, dead_field_problem, flat_colour_psnr
 from fourierf_plugin.engine.machine import pick_device, seed_everything
 from fourierf_plugin.engine.observers import (
@@ -37,6 +43,7 @@ from fourierf_plugin.engine.optimizers import OptimizerConfig, build_optimizer, 
 from fourierf_plugin.engine.option_checks import check_training_options
 from fourierf_plugin.engine.run_dir import lock_run, make_run_dir, views_record
 from fourierf_plugin.exporter.marching_cubes import describe, export_field_mesh
+from fourierf_plugin.models.fourierf import FourieRFModel
 from fourierf_plugin.pipelines.base import Pipeline, PipelineConfig
 from fourierf_plugin.utils.console import (
     TaskProgress,
@@ -323,6 +330,76 @@ class Trainer:
         deadline = self.config.train_deadline_seconds
         return deadline is not None and not self.start_step and elapsed >= deadline
 
+    # -- the run's length, planned again from its own speed --------------------------------------------------------
+    def _replan_window(self) -> tuple[int, int] | None:
+        """Where a fresh ``--time-budget`` run times its own iterations, ``(from, to)`` in iterations done, and plans
+        its length again at ``to``: ``REPLAN_SHARE`` of the way to its first count-dependent event, so that a
+        shorter run still has every event ahead of it; None without a length plan, on resume, or for too few steps."""
+        c = self.config
+        if c.length_plan is None or self.start_step:
+            return None
+        events = [s for s in self._event_steps(c.max_num_iterations) or () if s > 0]
+        to = math.floor(REPLAN_SHARE * min(events, default=c.max_num_iterations))
+        return (START_STEPS, to) if to - START_STEPS >= MIN_TIMED_STEPS else None
+
+    def _event_steps(self, iterations: int) -> list[int] | None:
+        """The run's count-dependent event steps were it ``iterations`` long, from probes of its model and datamanager
+        (the run itself unchanged); None where its schedules do not fit that many."""
+        config = copy.deepcopy(self.config)
+        model, manager = copy.copy(self.pipeline.model), copy.copy(self.pipeline.datamanager)
+        model.config, manager.config = config.pipeline.model, config.pipeline.datamanager
+        try:
+            set_run_length(config, model, manager, iterations)
+        except ValueError:
+            return None
+        return sorted(model.event_steps() + manager.stage_steps())
+
+    def _keeps_events(self, iterations: int, done: int) -> bool:
+        """Whether a run of ``iterations`` has the same events as this one before ``done`` (no event that happened
+        moves, none still ahead falls before it)."""
+        now, then = self._event_steps(self.config.max_num_iterations) or [], self._event_steps(iterations)
+        return then is not None and [s for s in then if s < done] == [s for s in now if s < done]
+
+    def _clock(self, started: float) -> float:
+        """Seconds since ``started``, the device's queued work included."""
+        if self.device.type == "cuda":
+            torch.cuda.synchronize(self.device)
+        return time.perf_counter() - started
+
+    def _replan(self, done: int, stamps: Sequence[float]) -> bool:
+        """Set the run's length to the count whose training fits its plan's time, ``stamps`` the clock after each
+        iteration of its window (``_replan_window``): at their median seconds per iteration (which a field lighting up
+        or a hiccup of the machine moves little; ``estimates.rest_seconds``), within the short-run rules' span and
+        without moving an event. Whether the length changed; said once, and logged."""
+        c, plan, model = self.config, self.config.length_plan, self.pipeline.model
+        assert plan is not None
+        elapsed, per_iteration = stamps[-1], statistics.median(b - a for a, b in itertools.pairwise(stamps))
+        current = c.max_num_iterations
+        keeps = functools.partial(self._keeps_events, done=done)
+        low = max(plan.low, *c.export_mesh_at, first_true(keeps, max(plan.low, done + 1), current))
+        high = last_true(keeps, current, plan.high - 1)
+
+        def seconds(iterations: int) -> float:
+            saves = -(-iterations // c.steps_per_save) - done // c.steps_per_save
+            rest = rest_seconds(c, iterations, done, per_iteration)
+            return elapsed + rest + saves * plan.seconds_per_save
+
+        iterations = max(low, last_true(lambda n: seconds(n) <= plan.train_seconds, low, high))
+        c.planned_train_seconds = seconds(iterations)
+        record = {"event": "replan", "step": done, "seconds_per_iteration": per_iteration, "from": current}
+        append_jsonl(self.run_dir / "metrics.jsonl", {**record, "to": iterations, "planned": c.planned_train_seconds})
+        if iterations == current:
+            return False
+        set_run_length(c, model, self.pipeline.datamanager, iterations)
+        save_config(c, self.run_dir / "config.json")
+        self.console.print(
+            f"time budget {c.time_budget}: re-planned after {done} iterations at this run's own "
+            f"{per_iteration:.3g} s per iteration: {current} -> {iterations} iterations, planned training time "
+            f"{format_duration(c.planned_train_seconds)}; occupancy updates after {model.occupancy_steps}, upsamples "
+            f"after {model.upsample_steps}"
+        )
+        return True
+
     def _train(self) -> Path:
         c = self.config
         model = self.pipeline.model
@@ -343,9 +420,13 @@ class Trainer:
         read_every_step = not uses_gpu_paths(c.pipeline.model.accel, self.device)
         shown: dict[str, float] = {}
         cut_at_budget = False
+        replan = self._replan_window()
+        stamps: list[float] = []  # the clock after each iteration of the re-plan's window
         notify_started(self.observers, self.pipeline, self.run_dir, self.start_step)
-        with _DeferredStop() as interrupt, TaskProgress(c.max_num_iterations, self.start_step) as progress:
-            for step in range(self.start_step, c.max_num_iterations):
+        with _DeferredStop() as interrupt, contextlib.ExitStack() as bars:
+            progress = bars.enter_context(TaskProgress(c.max_num_iterations, self.start_step))
+            while done < c.max_num_iterations:  # a --time-budget run may set its length once (``_replan``)
+                step = done
                 with timer or contextlib.nullcontext(), phase("other"):
                     optimizer, metrics, lr_scale = optimisation_step(
                         self.pipeline, optimizer, c.optimizer, step, reset_steps, c.max_num_iterations
@@ -376,6 +457,12 @@ class Trainer:
                     self.save(done, optimizer)
                 if done in c.export_mesh_at:
                     self._export_mesh(done)
+                if replan is not None and replan[0] <= done <= replan[1]:
+                    stamps.append(self._clock(started))
+                    if done == replan[1] and self._replan(done, stamps):
+                        reset_steps = [s + 1 for s in model.reset_steps()]
+                        progress.close()
+                        progress = bars.enter_context(TaskProgress(c.max_num_iterations, done))
                 if interrupt.requested:
                     break
                 if self._past_deadline(time.perf_counter() - started):
@@ -425,6 +512,54 @@ class Trainer:
             self.console.print(f"a dead density field was revived on {shown['revived_batches']:.0f} training batches")
         self.console.print(f"evaluate with: fourierf-eval --load-config {self.run_dir / 'config.json'}")
         return self.run_dir
+
+
+START_STEPS, MIN_TIMED_STEPS = 5, 8
+"""A ``--time-budget`` run's re-plan times its iterations after its first ``START_STEPS`` (allocations, first calls),
+and only when at least ``MIN_TIMED_STEPS`` come before it."""
+REPLAN_SHARE = 0.75
+"""How far towards its first count-dependent event a ``--time-budget`` run plans its length again: later times more
+steps, earlier leaves a shorter run room to keep that event ahead."""
+
+
+def first_true(holds: Callable[[int], bool], low: int, high: int) -> int:
+    """The least count in ``low..high`` where ``holds`` (false, then true from some count on; ``high`` if none)."""
+    return low + bisect.bisect_left(range(low, high), True, key=holds)
+
+
+def last_true(holds: Callable[[int], bool], low: int, high: int) -> int:
+    """The greatest count in ``low..high`` where ``holds`` (true up to some count, then false; ``low - 1`` if none)."""
+    return low - 1 + bisect.bisect_left(range(low, high + 1), True, key=lambda n: not holds(n))
+
+
+def set_run_length(config: TrainerConfig, model: FourieRFModel, manager: DataManager, iterations: int) -> None:
+    """Make ``config``'s run ``iterations`` long: its count, the settings its length plan keeps at a step (each now
+    that step's fraction of the new count), and the schedules of ``model`` and ``manager`` built from its pipeline."""
+    config.max_num_iterations = iterations
+    for path, index, step in config.length_plan.pinned if config.length_plan else ():
+        *parents, name = path.split(".")
+        owner = functools.reduce(getattr, parents, config)
+        value = round(step / iterations, 4)
+        if index >= 0:
+            value = tuple(value if i == index else v for i, v in enumerate(getattr(owner, name)))
+        setattr(owner, name, value)
+    model.set_run_length(iterations)
+    manager.set_run_length(iterations)
+
+
+@dataclass
+class LengthPlan(InstantiateConfig):
+    """What a ``--time-budget`` run plans its length again with, from its own speed before its first count-dependent
+    event (set by ``method_configs.time_budget``)."""
+
+    train_seconds: float
+    """The training time to fill: the budget less its margin."""
+    seconds_per_save: float
+    low: int
+    high: int
+    """The counts ``low <= n < high`` the short-run rules that configured the run also cover."""
+    pinned: tuple[tuple[str, int, int], ...] = ()
+    """Settings a short-run rule placed at a fixed step: (config path, item of a tuple or -1, step)."""
 
 
 @dataclass
@@ -490,11 +625,13 @@ class TrainerConfig(InstantiateConfig):
     (docs/defaults.md, one section per rule); False keeps the preset's values at any budget."""
     time_budget: str | None = None
     """Train for this long (90s, 5m, 1.5h, 1h30m) instead of a set iteration count: timing a few steps first, the
-    run picks the count that ends training within it (setup and evaluation not included), and stops there should the
-    iterations cost more than planned; every schedule stays a fraction of the run. Not with --max-num-iterations, nor
-    on resume."""
+    run picks the count that ends training within it (setup and evaluation not included), picks it again from its
+    own speed before its first event, and stops there should the iterations cost more than planned; every schedule
+    stays a fraction of the run. Not with --max-num-iterations, nor on resume."""
     planned_train_seconds: tyro.conf.Suppress[float | None] = None
     """The training time a --time-budget run planned (set by finalize), compared with the actual one at the end."""
+    length_plan: tyro.conf.Suppress[LengthPlan | None] = None
+    """How a --time-budget run plans its length again from its own speed once it trains (set by finalize)."""
     train_deadline_seconds: tyro.conf.Suppress[float | None] = None
     """A --time-budget run's training stops and saves here, iterations left or not: an iteration's cost follows the
     field's state (lit, pruned), so the plan is an estimate and the budget a promise."""

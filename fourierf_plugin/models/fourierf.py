@@ -124,25 +124,37 @@ class FourieRFModel(nn.Module):
         super().__init__()
         self.config = config
         self.near, self.far = float(near), float(far)
-        self.max_iters = int(max_iters)
         self.generator = generator
         self.step_generator = step_generator if step_generator is not None else generator
         self.gpu_paths = uses_gpu_paths(config.accel, device)
         self._box: tuple[tuple, list[float]] | None = None
         self.effects = effects
-        fc = config.field
+        self.set_run_length(max_iters)
+        self._scaling_now = self.gradient_scalers_at(0)  # ``prepare`` sets them for each step
+        self._background_now = self.training_background(0)  # ``prepare`` sets it for each step
+        self.field = self._build_field(scene_box, effects, generator, device)
+        self.occupancy = OccupancyGrid()
+        self.empty_at_last_update = False  # the latest occupancy update found no density: a dead field, late in a run
+
+    def set_run_length(self, max_iters: int) -> None:
+        """Place every schedule that is a fraction of the run at a run of ``max_iters`` iterations (at construction,
+        and when a ``--time-budget`` run plans its length again before the first of its events)."""
+        config, fc = self.config, self.config.field
+        self.max_iters = int(max_iters)
         self.upsample_steps = schedules.steps_from_fractions(fc.upsample_fractions, max_iters)
         self.voxel_targets = schedules.voxel_counts(fc.n_voxels_init, fc.n_voxels_final, len(self.upsample_steps))
         self.occupancy_steps = schedules.steps_from_fractions(config.occupancy_update_fractions, max_iters)
         # the first step after the first occupancy update's own step (the L1's switch; the random background's start)
         self.after_first_update = self.occupancy_steps[0] + 1 if self.occupancy_steps else None
-        self.regularisers: list[Regulariser] = config.regularisers(effects, max_iters)
-        self._scaling_now = self.gradient_scalers_at(0)  # ``prepare`` sets them for each step
+        self.regularisers: list[Regulariser] = config.regularisers(self.effects, max_iters)
         self.random_background_step = self._random_background_step()
-        self._background_now = self.training_background(0)  # ``prepare`` sets it for each step
-        self.field = self._build_field(scene_box, effects, generator, device)
-        self.occupancy = OccupancyGrid()
-        self.empty_at_last_update = False  # the latest occupancy update found no density: a dead field, late in a run
+
+    def event_steps(self) -> list[int]:
+        """The steps of the run's count-dependent events: upsamples, occupancy updates (and the L1's switch after the
+        first), the random background's start and the regularisers' switches."""
+        switches = [r.from_step for r in self.regularisers if hasattr(r, "from_step")]
+        after = [self.after_first_update] if self.after_first_update is not None else []
+        return sorted([*self.upsample_steps, *self.occupancy_steps, *after, self.random_background_step, *switches])
 
     def _build_field(
         self, scene_box: Tensor, effects: SceneEffects, generator: torch.Generator, device: torch.device | str

@@ -141,6 +141,8 @@ class LiveViewer:
         assert progress is not None
         progress.step, progress.max_steps, progress.metrics = report.step, report.max_steps, report.metrics
         progress.f_density, progress.f_color = report.f_density, report.f_color
+        if view.viewed.model.max_iters != report.max_steps:  # a --time-budget run planned its length again
+            view.viewed.model.set_run_length(report.max_steps)
         self._elapsed = report.elapsed_s
         if view.client_count == 0:
             return

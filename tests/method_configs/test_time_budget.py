@@ -108,6 +108,7 @@ def test_the_budgets_count_feeds_the_rules_like_a_typed_one(monkeypatch, iterati
     assert budgeted.max_num_iterations == iterations
     assert budgeted.planned_train_seconds == pytest.approx(iterations * per_iteration_for(iterations, 600.0))
     budgeted.time_budget, budgeted.planned_train_seconds, budgeted.train_deadline_seconds = None, None, None
+    budgeted.length_plan = None
     assert budgeted == typed
     rest = [n for n in notes if not n.startswith(("time budget ", "run size "))]
     assert rest == [n for n in typed_notes if not n.startswith("run size ")]

@@ -19,6 +19,12 @@ SECONDS_PER_RAY_STEP = 1.05e-6
 (``benchmarks/ab_speed.py`` times it): an estimate, not a promise."""
 
 
+SECONDS_PER_ZERORF_RAY_STEP = 4.3e-6
+"""A zerorf-vm iteration's cost per ray and per voxel of the final grid's side, 2 threads: ZeroRF's decoder reads six
+factors and a 64-wide layer at every sample it keeps, and its culling evaluates the density twice; fitted between an
+object (whose box the occupancy grid crops) and a forward-facing scene (whose frustum it fills)."""
+
+
 SECONDS_PER_GENERATED_VALUE = 1.0e-6
 """A zerorf-vm iteration's added cost per value its generators draw (forward and backward, ZeroRF's widths, 2 threads),
 fitted to ZeroRF's three canvases at the default CPU grid."""
@@ -62,6 +68,7 @@ def estimate_seconds(config: Any, threads: int) -> float:
         scale = 2**zerorf.upsample_levels
         noise = zerorf.noise_resolution or math.ceil(side / scale)
         canvas = scale * noise
+        per_iteration = rays * side * SECONDS_PER_ZERORF_RAY_STEP
         per_iteration += 3 * canvas**2 * zerorf.feature_channels * SECONDS_PER_GENERATED_VALUE
     return config.max_num_iterations * per_iteration * 2.0 / max(1, threads)
 

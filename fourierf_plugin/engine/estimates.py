@@ -60,15 +60,14 @@ def estimate_seconds(config: Any, threads: int) -> float:
     field = config.pipeline.model.field
     side = field.n_voxels_final ** (1.0 / 3.0)
     rays = mean_rays_per_batch(config) + config.pipeline.model.unseen_rays()
-    per_iteration = rays * side * SECONDS_PER_RAY_STEP
+    zerorf = generator_config(config.pipeline.model)
+    per_iteration = rays * side * (SECONDS_PER_RAY_STEP if zerorf is None else SECONDS_PER_ZERORF_RAY_STEP)
     if mlp_config(config.pipeline.model) is not None:
         per_iteration = mlp_seconds_per_iteration(config, rays)
-    zerorf = generator_config(config.pipeline.model)
     if zerorf is not None:  # a cubic box's canvases: the smallest multiple of 2^levels covering the final grid
         scale = 2**zerorf.upsample_levels
         noise = zerorf.noise_resolution or math.ceil(side / scale)
         canvas = scale * noise
-        per_iteration = rays * side * SECONDS_PER_ZERORF_RAY_STEP
         per_iteration += 3 * canvas**2 * zerorf.feature_channels * SECONDS_PER_GENERATED_VALUE
     return config.max_num_iterations * per_iteration * 2.0 / max(1, threads)
 

@@ -354,11 +354,11 @@ class Trainer:
             return None
         return sorted(model.event_steps() + manager.stage_steps())
 
-    def _keeps_events(self, iterations: int, done: int) -> bool:
-        """Whether a run of ``iterations`` has the same events as this one before ``done`` (no event that happened
-        moves, none still ahead falls before it)."""
-        now, then = self._event_steps(self.config.max_num_iterations) or [], self._event_steps(iterations)
-        return then is not None and [s for s in then if s < done] == [s for s in now if s < done]
+    def _keeps_events(self, iterations: int, done: int, happened: list[int]) -> bool:
+        """Whether a run of ``iterations`` has exactly ``happened`` (this run's events) before ``done`` (no event that
+        happened moves, none still ahead falls before it)."""
+        then = self._event_steps(iterations)
+        return then is not None and [s for s in then if s < done] == happened
 
     def _clock(self, started: float) -> float:
         """Seconds since ``started``, the device's queued work included."""
@@ -375,7 +375,8 @@ class Trainer:
         assert plan is not None
         elapsed, per_iteration = stamps[-1], statistics.median(b - a for a, b in itertools.pairwise(stamps))
         current = c.max_num_iterations
-        keeps = functools.partial(self._keeps_events, done=done)
+        happened = [s for s in self._event_steps(current) or [] if s < done]
+        keeps = functools.partial(self._keeps_events, done=done, happened=happened)
         low = max(plan.low, *c.export_mesh_at, first_true(keeps, max(plan.low, done + 1), current))
         high = last_true(keeps, current, plan.high - 1)
 

@@ -4,6 +4,7 @@ suite (``suite.toml``) with the setting names it is written in."""
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import platform
@@ -379,6 +380,8 @@ class Suite:
     protocols: dict[str, Protocol]
     scenes: dict[str, dict]
     settings: dict[str, tuple[str, ...]]
+    tokens: dict[str, list[str]]  # a setting's words and the flags they stand for
+    valued: dict[str, list[str]]
     targets: list[dict]
     rule_along_the_budget: dict[str, dict[str, str]]
     grids: list[dict]
@@ -392,6 +395,7 @@ class Suite:
         return args
 
 
+@functools.cache
 def load_suite() -> Suite:
     data = tomllib.loads(Path(__file__).with_name("suite.toml").read_text())
     protocols = {name: Protocol(name, **p | {"grid": tuple(p["grid"])}) for name, p in data["protocols"].items()}
@@ -399,72 +403,24 @@ def load_suite() -> Suite:
     return Suite(**data | {"protocols": protocols, "settings": settings})
 
 
-F_FINAL, F_FINAL_COLOR = "--pipeline.model.fourier.f-final", "--pipeline.model.fourier.f-final-color"
-F0_DENSITY, F0_COLOR = "--pipeline.model.fourier.f0-density", "--pipeline.model.fourier.f0-color"
-FNM, FNM_FROM = "--pipeline.model.floaters-gradient-scaling", "--pipeline.model.floaters-gradient-scaling-from"
-L1_INITIAL, L1_REST = "--pipeline.model.l1-weight-initial", "--pipeline.model.l1-weight-rest"
-BACKGROUND = "--pipeline.effects.background"
-OCCUPANCY = "--pipeline.model.occupancy-update-fractions"
-TOKENS: dict[str, list[str]] = {  # the tokens of a setting's name that stand for fixed flags
-    "preset": [],  # the preset as the trainer builds it (the budget rule off, as for every setting)
-    "nodecay": ["--optimizer.lr-decay-ratio", "1.0"],
-    "tvconst": ["--pipeline.model.tv-decay-ratio", "1.0"],
-    "occ": ["--pipeline.effects.occlusion-regularization", "True"],
-    "fnm": [FNM, "True"],  # Floaters-No-More's gradient scaling
-    "fnmlate": [FNM, "True", FNM_FROM, "0.2667"],  # ... from the step a 3000-iteration run's band is open (step 800)
-    "bgrand": [BACKGROUND, "random", "--pipeline.model.random-background-from", "0"],  # from the first step
-    "bgwarm": [BACKGROUND, "random"],  # from the step after the first occupancy update, white before
-    "mirror": ["--pipeline.model.fourier.boundary", "mirror"],
-    "l1off": [L1_INITIAL, "0", L1_REST, "0"],
-    "l1late": [L1_INITIAL, "0"],  # no density L1 before the first occupancy update
-    "plain": ["--pipeline.model.field.revive-dead-density", "False"],  # TensoRF's ReLU for the density
-    "zfree": ["--pipeline.model.fourier.density-axes", "0", "1"],  # the density's band on x and y only
-    "alphamask0.25": [OCCUPANCY, "0.25"],  # one occupancy update, at 25 % of the run
-    "alphamask0.3": [OCCUPANCY, "0.3", "0.5"],  # two, at 30 % and 50 %
-    "up0.01": ["--pipeline.model.field.upsample-fractions", "0.01"],  # the final grid from 1 % of the run on
-}
-VALUED: dict[str, Callable[[str], list[str]]] = {  # a prefix and a number: ``tv4``, ``f0d0.1``
-    "wd": lambda v: ["--optimizer.weight-decay", v],
-    "lr": lambda v: ["--optimizer.lr-grids", v],
-    "tv": lambda v: ["--pipeline.model.tv-weight-density", v, "--pipeline.model.tv-weight-appearance", v],
-    "ramp": lambda v: ["--pipeline.model.fourier.ramp-fraction", v],  # the share of the run over which the band opens
-    "f": lambda v: [F0_DENSITY, v, F0_COLOR, v],  # both grids' first band
-    "f0d": lambda v: [F0_DENSITY, v],
-    "f0c": lambda v: [F0_COLOR, v],
-    "ffinal": lambda v: [F_FINAL, v],  # the band's final cutoff
-    "ffinald": lambda v: [F_FINAL, v, F_FINAL_COLOR, "1.0"],  # ... of the geometry alone
-    "ffinalc": lambda v: [F_FINAL_COLOR, v],  # ... of the colour alone
-    "comp": lambda v: [  # density components per plane/line group, three times as many for appearance
-        "--pipeline.model.field.density-components", *[v] * 3,
-        "--pipeline.model.field.appearance-components", *[str(3 * int(v))] * 3,
-    ],
-    "g": lambda v: [  # the final grid side, from half of it
-        "--pipeline.model.field.n-voxels-init", str((int(v) // 2) ** 3),
-        "--pipeline.model.field.n-voxels-final", str(int(v) ** 3),
-    ],
-    "revive": lambda v: ["--pipeline.model.field.revive-patience", v],  # dark batches before a dead density revives
-    "fnmfrom": lambda v: [FNM_FROM, v],
-    "occ": lambda v: ["--pipeline.model.occlusion-weight", v],  # FreeNeRF's occlusion term
-    "ds": lambda v: ["--pipeline.model.depth-smoothness-weight", v],  # RegNeRF's depth smoothness
-    "dist": lambda v: ["--pipeline.model.distortion-weight", v],  # mip-NeRF 360's distortion loss
-    "ent": lambda v: ["--pipeline.model.entropy-weight", v],  # InfoNeRF's ray entropy
-    "u": lambda v: ["--pipeline.model.entropy-unseen-rays", v],  # ... on this many unseen rays
-}  # fmt: skip
 CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "mirror", "zfree")  # tensorf-vm (no masks) would repeat its run: skipped
 
 
 def setting_flags(setting: str) -> list[str]:
-    """The ``fourierf-train`` flags a setting's name stands for."""
-    flags = []
+    """The ``fourierf-train`` flags a setting's name stands for, in the words of suite.toml's [tokens] and [valued]."""
+    suite, flags = load_suite(), []
     for token in setting.split("-"):
-        if token in TOKENS:
-            flags += TOKENS[token]
-            continue
         match = re.fullmatch(r"([a-z0-9]*?[a-z])(\d+(?:\.\d+)?)", token)
-        if match is None or match[1] not in VALUED:
-            known = f"{', '.join(TOKENS)}, or one of {', '.join(VALUED)} and a number"
+        if token in suite.tokens:
+            flags += suite.tokens[token]
+        elif match and match[1] in suite.valued:
+            n = int(float(match[2]))
+            flags += [
+                f.format(v=match[2], v3=3 * n, cube=n**3, half_cube=(n // 2) ** 3) for f in suite.valued[match[1]]
+            ]
+        else:
+            known = f"{', '.join(suite.tokens)}, or one of {', '.join(suite.valued)} and a number"
             raise ValueError(f"{setting}: no such token {token!r}; a token is {known}")
-        flags += VALUED[match[1]](match[2])
     return flags
 
 

@@ -382,6 +382,7 @@ class Suite:
     settings: dict[str, tuple[str, ...]]
     tokens: dict[str, list[str]]  # a setting's words and the flags they stand for
     valued: dict[str, list[str]]
+    curriculum_only: list[str]  # the words tensorf-vm (no masks) skips: its run would repeat another
     targets: list[dict]
     rule_along_the_budget: dict[str, dict[str, str]]
     grids: list[dict]
@@ -403,9 +404,6 @@ def load_suite() -> Suite:
     return Suite(**data | {"protocols": protocols, "settings": settings})
 
 
-CURRICULUM_ONLY = ("ramp", "f0", "ffinal", "mirror", "zfree")  # tensorf-vm (no masks) would repeat its run: skipped
-
-
 def setting_flags(setting: str) -> list[str]:
     """The ``fourierf-train`` flags a setting's name stands for, in the words of suite.toml's [tokens] and [valued]."""
     suite, flags = load_suite(), []
@@ -425,7 +423,8 @@ def setting_flags(setting: str) -> list[str]:
 
 
 def applies(method: str, setting: str) -> bool:
-    return method != "tensorf-vm" or not any(part.startswith(CURRICULUM_ONLY) for part in setting.split("-"))
+    only = tuple(load_suite().curriculum_only)
+    return method != "tensorf-vm" or not any(part.startswith(only) for part in setting.split("-"))
 
 
 def rows_by(results: dict[str, dict], scene: str, protocol: str, method: str) -> dict[str, list[dict]]:

@@ -23,10 +23,11 @@ SCENES = {  # its data (the repository's, or under --shared), budgets and parser
 def measure(data: Path, budget: str, parser: tuple[str, ...], work: Path, name: str) -> dict:
     _, records, wall, _ = harness.train_run(data, work, name, "--time-budget", budget, *parser)
     done = harness.done_record(records) or {}
-    replan = next((r for r in records if r.get("event") == "replan"), {})
+    replans = [r for r in records if r.get("event") == "replan"]
     return {
         "budget": budget, "budget_seconds": parse_duration(budget), "iterations": done.get("step"),
-        "planned_iterations": done.get("planned_iterations", done.get("step")), "first_iterations": replan.get("from"),
+        "planned_iterations": done.get("planned_iterations", done.get("step")),
+        "plans": [r["from"] for r in replans[:1]] + [r["to"] for r in replans],
         "planned_seconds": done.get("planned_train_seconds"), "train_seconds": done.get("train_seconds"),
         "wall_seconds": wall,
     }  # fmt: skip
@@ -38,9 +39,10 @@ def within(row: dict) -> bool:
 
 
 def planned(row: dict) -> str:
-    """The count planned before training and, where the run planned it again, the new one."""
-    first, final = row.get("first_iterations"), row["planned_iterations"]
-    return str(final) if first in (None, final) else f"{first} → {final}"
+    """The count planned before training and each new one the run planned from its own speed."""
+    plans = row.get("plans", [])
+    counts = [n for i, n in enumerate(plans) if not i or n != plans[i - 1]]
+    return " → ".join(map(str, counts or [row["planned_iterations"]]))
 
 
 def section(rows: dict[str, list[dict]]) -> list[str]:
@@ -51,7 +53,8 @@ def section(rows: dict[str, list[dict]]) -> list[str]:
             "python benchmarks/time_budget.py",
             "`fourierf-train fourierf-vm --data DATA --time-budget B` with every other value at its default, one run "
             "at a time. The budget covers training; setup, the opening timing and the final save are in the wall "
-            "time beside it. Planned iterations: timed before training → planned again from the run's own speed.",
+            "time beside it. Planned iterations: timed before training → planned again from the run's own "
+            "speed after its first steps → and after its last event.",
         ),
         "| scene | budget | planned iterations | iterations run | planned training | training | whole command |",
         "|---|---|---|---|---|---|---|",

@@ -17,7 +17,7 @@ from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import ClassVar, Literal
+from typing import ClassVar, Literal, NamedTuple
 
 import torch
 import tyro
@@ -331,16 +331,27 @@ class Trainer:
         return deadline is not None and not self.start_step and elapsed >= deadline
 
     # -- the run's length, planned again from its own speed --------------------------------------------------------
-    def _replan_window(self) -> tuple[int, int] | None:
-        """Where a fresh ``--time-budget`` run times its own iterations, ``(from, to)`` in iterations done, and plans
-        its length again at ``to``: ``REPLAN_SHARE`` of the way to its first count-dependent event, so that a
-        shorter run still has every event ahead of it; None without a length plan, on resume, or for too few steps."""
+    def _replan_window(self) -> ReplanWindow | None:
+        """Where a fresh ``--time-budget`` run first times its own iterations and plans its length again:
+        ``REPLAN_SHARE`` of the way to its first count-dependent event, so that a shorter run still has every event
+        ahead of it; None without a length plan, on resume, or for too few steps (the last window may still come)."""
         c = self.config
         if c.length_plan is None or self.start_step:
             return None
         events = [s for s in self._event_steps(c.max_num_iterations) or () if s > 0]
         to = math.floor(REPLAN_SHARE * min(events, default=c.max_num_iterations))
-        return (START_STEPS, to) if to - START_STEPS >= MIN_TIMED_STEPS else None
+        return ReplanWindow(START_STEPS, to, last=False) if to - START_STEPS >= MIN_TIMED_STEPS else None
+
+    def _last_window(self) -> ReplanWindow | None:
+        """Where a fresh ``--time-budget`` run times its iterations once every count-dependent event is behind it (its
+        grid final, its rays filtered: the cost the rest of the run has) and plans its length a last time; None
+        without a length plan, on resume, or where too few iterations follow its last event."""
+        c = self.config
+        if c.length_plan is None or self.start_step:
+            return None
+        start = max(self._event_steps(c.max_num_iterations) or [0]) + 1 + START_STEPS
+        to = start + max(MIN_TIMED_STEPS, math.ceil(LAST_TIMED_SHARE * c.max_num_iterations))
+        return ReplanWindow(start, to, last=True) if to < c.max_num_iterations else None
 
     def _event_steps(self, iterations: int) -> list[int] | None:
         """The run's count-dependent event steps were it ``iterations`` long, from probes of its model and datamanager
@@ -360,29 +371,39 @@ class Trainer:
         then = self._event_steps(iterations)
         return then is not None and [s for s in then if s < done] == happened
 
+    def _keeps_all_behind(self, iterations: int, done: int) -> bool:
+        """Whether a run of ``iterations`` has every event before ``done`` (the last re-plan: the events happened, none
+        comes back ahead; where each falls in the past does not change the state)."""
+        then = self._event_steps(iterations)
+        return then is not None and all(s < done for s in then)
+
     def _clock(self, started: float) -> float:
         """Seconds since ``started``, the device's queued work included."""
         if self.device.type == "cuda":
             torch.cuda.synchronize(self.device)
         return time.perf_counter() - started
 
-    def _replan(self, done: int, stamps: Sequence[float]) -> bool:
+    def _replan(self, done: int, stamps: Sequence[float], last: bool) -> bool:
         """Set the run's length to the count whose training fits its plan's time, ``stamps`` the clock after each
-        iteration of its window (``_replan_window``): at their median seconds per iteration (which a field lighting up
-        or a hiccup of the machine moves little; ``estimates.rest_seconds``), within the short-run rules' span and
-        without moving an event. Whether the length changed; said once, and logged."""
+        iteration of its window: at their median seconds per iteration (which a hiccup of the machine moves little),
+        the rest costing that per unit of grid side as the grid grows (``estimates.rest_seconds``) or, in the ``last``
+        window, that per iteration; within the short-run rules' span and without moving an event ahead of ``done`` or
+        back past it. Whether the length changed; said once, and logged."""
         c, plan, model = self.config, self.config.length_plan, self.pipeline.model
         assert plan is not None
         elapsed, per_iteration = stamps[-1], statistics.median(b - a for a, b in itertools.pairwise(stamps))
         current = c.max_num_iterations
-        happened = [s for s in self._event_steps(current) or [] if s < done]
-        keeps = functools.partial(self._keeps_events, done=done, happened=happened)
+        if last:
+            keeps = functools.partial(self._keeps_all_behind, done=done)
+        else:
+            happened = [s for s in self._event_steps(current) or [] if s < done]
+            keeps = functools.partial(self._keeps_events, done=done, happened=happened)
         low = max(plan.low, *c.export_mesh_at, first_true(keeps, max(plan.low, done + 1), current))
         high = last_true(keeps, current, plan.high - 1)
 
         def seconds(iterations: int) -> float:
             saves = -(-iterations // c.steps_per_save) - done // c.steps_per_save
-            rest = rest_seconds(c, iterations, done, per_iteration)
+            rest = (iterations - done) * per_iteration if last else rest_seconds(c, iterations, done, per_iteration)
             return elapsed + rest + saves * plan.seconds_per_save
 
         iterations = max(low, last_true(lambda n: seconds(n) <= plan.train_seconds, low, high))
@@ -393,11 +414,12 @@ class Trainer:
             return False
         set_run_length(c, model, self.pipeline.datamanager, iterations)
         save_config(c, self.run_dir / "config.json")
+        after = "its last event" if last else "its first steps"
         self.console.print(
             f"time budget {c.time_budget}: re-planned after {done} iterations at this run's own "
-            f"{per_iteration:.3g} s per iteration: {current} -> {iterations} iterations, planned training time "
-            f"{format_duration(c.planned_train_seconds)}; occupancy updates after {model.occupancy_steps}, upsamples "
-            f"after {model.upsample_steps}"
+            f"{per_iteration:.3g} s per iteration ({after}): {current} -> {iterations} iterations, planned training "
+            f"time {format_duration(c.planned_train_seconds)}; occupancy updates after {model.occupancy_steps}, "
+            f"upsamples after {model.upsample_steps}"
         )
         return True
 
@@ -421,12 +443,12 @@ class Trainer:
         read_every_step = not uses_gpu_paths(c.pipeline.model.accel, self.device)
         shown: dict[str, float] = {}
         cut_at_budget = False
-        replan = self._replan_window()
+        window = self._replan_window() or self._last_window()
         stamps: list[float] = []  # the clock after each iteration of the re-plan's window
         notify_started(self.observers, self.pipeline, self.run_dir, self.start_step)
         with _DeferredStop() as interrupt, contextlib.ExitStack() as bars:
             progress = bars.enter_context(TaskProgress(c.max_num_iterations, self.start_step))
-            while done < c.max_num_iterations:  # a --time-budget run may set its length once (``_replan``)
+            while done < c.max_num_iterations:  # a --time-budget run may set its length twice (``_replan``)
                 step = done
                 with timer or contextlib.nullcontext(), phase("other"):
                     optimizer, metrics, lr_scale = optimisation_step(
@@ -458,12 +480,14 @@ class Trainer:
                     self.save(done, optimizer)
                 if done in c.export_mesh_at:
                     self._export_mesh(done)
-                if replan is not None and replan[0] <= done <= replan[1]:
+                if window is not None and window.start <= done <= window.to:
                     stamps.append(self._clock(started))
-                    if done == replan[1] and self._replan(done, stamps):
-                        reset_steps = [s + 1 for s in model.reset_steps()]
-                        progress.close()
-                        progress = bars.enter_context(TaskProgress(c.max_num_iterations, done))
+                    if done == window.to:
+                        if self._replan(done, stamps, window.last):
+                            reset_steps = [s + 1 for s in model.reset_steps()]
+                            progress.close()
+                            progress = bars.enter_context(TaskProgress(c.max_num_iterations, done))
+                        window, stamps = None if window.last else self._last_window(), []
                 if interrupt.requested:
                     break
                 if self._past_deadline(time.perf_counter() - started):
@@ -521,6 +545,18 @@ and only when at least ``MIN_TIMED_STEPS`` come before it."""
 REPLAN_SHARE = 0.75
 """How far towards its first count-dependent event a ``--time-budget`` run plans its length again: later times more
 steps, earlier leaves a shorter run room to keep that event ahead."""
+LAST_TIMED_SHARE = 0.05
+"""The share of a ``--time-budget`` run timed after its last event, before it plans its length a last time: enough
+steps for a steady median, most of the rest left to adjust."""
+
+
+class ReplanWindow(NamedTuple):
+    """The iterations done over which a ``--time-budget`` run times itself, from ``start`` to ``to`` where it plans its
+    length again; ``last``: once every event is behind it."""
+
+    start: int
+    to: int
+    last: bool
 
 
 def first_true(holds: Callable[[int], bool], low: int, high: int) -> int:
@@ -627,8 +663,8 @@ class TrainerConfig(InstantiateConfig):
     time_budget: str | None = None
     """Train for this long (90s, 5m, 1.5h, 1h30m) instead of a set iteration count: timing a few steps first, the
     run picks the count that ends training within it (setup and evaluation not included), picks it again from its
-    own speed before its first event, and stops there should the iterations cost more than planned; every schedule
-    stays a fraction of the run. Not with --max-num-iterations, nor on resume."""
+    own speed before its first event and after its last, and stops there should the iterations cost more than planned;
+    every schedule stays a fraction of the run. Not with --max-num-iterations, nor on resume."""
     planned_train_seconds: tyro.conf.Suppress[float | None] = None
     """The training time a --time-budget run planned (set by finalize), compared with the actual one at the end."""
     length_plan: tyro.conf.Suppress[LengthPlan | None] = None

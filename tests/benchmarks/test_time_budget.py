@@ -7,6 +7,7 @@ from tests.helpers import load_benchmark
 
 def test_the_table_shows_the_count_planned_again():
     bench = load_benchmark("time_budget")
-    assert bench.planned({"first_iterations": 799, "planned_iterations": 650}) == "799 → 650"
-    assert bench.planned({"first_iterations": 650, "planned_iterations": 650}) == "650"
-    assert bench.planned({"first_iterations": None, "planned_iterations": 650}) == "650"
+    assert bench.planned({"plans": [799, 650, 702], "planned_iterations": 702}) == "799 → 650 → 702"
+    assert bench.planned({"plans": [799, 650, 650], "planned_iterations": 650}) == "799 → 650"
+    assert bench.planned({"plans": [650, 650], "planned_iterations": 650}) == "650"
+    assert bench.planned({"plans": [], "planned_iterations": 650}) == "650"

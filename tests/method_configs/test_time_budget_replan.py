@@ -1,6 +1,6 @@
 """A ``--time-budget`` run plans its length again once it trains (``Trainer._replan``): before every count-dependent
-event, from its own speed, inside the short-run rules' span, every schedule following, and a resume equal to an
-uninterrupted run."""
+event and once more after the last, from its own speed, inside the short-run rules' span, every schedule following,
+and a resume equal to an uninterrupted run."""
 
 from __future__ import annotations
 
@@ -73,16 +73,21 @@ def schedules(pipeline: Pipeline, steps: range) -> dict:
 )
 def test_the_replan_falls_before_every_event_after_enough_timed_steps(tmp_path, extra):
     trainer = Trainer(planned(tiny_trainer_config(tmp_path, iters=200, extra=extra)))
-    start, at = trainer._replan_window()
+    start, at, last = trainer._replan_window()
     events = [s for s in trainer.pipeline.model.event_steps() + trainer.pipeline.datamanager.stage_steps() if s > 0]
-    assert start == START_STEPS and at - start >= MIN_TIMED_STEPS
+    assert start == START_STEPS and at - start >= MIN_TIMED_STEPS and not last
     assert at <= min(events) - 1, "the re-plan (after `at` iterations) comes before the first event's iteration"
+    start, at, last = trainer._last_window()
+    assert start >= max(events) + 1 + START_STEPS and at - start >= MIN_TIMED_STEPS and at < 200 and last
 
 
 def test_no_replan_without_a_plan_too_few_steps_or_on_resume(tmp_path):
-    assert Trainer(tiny_trainer_config(tmp_path / "a", iters=200))._replan_window() is None
+    unplanned = Trainer(tiny_trainer_config(tmp_path / "a", iters=200))
+    assert unplanned._replan_window() is None and unplanned._last_window() is None
     early = ["--pipeline.model.occupancy-update-fractions", "0.05"]  # step 10: no room for the timed steps
     assert Trainer(planned(tiny_trainer_config(tmp_path / "b", iters=200, extra=early)))._replan_window() is None
+    late = ["--pipeline.model.field.upsample-fractions", "0.3", "0.95"]  # step 190: no room after the last event
+    assert Trainer(planned(tiny_trainer_config(tmp_path / "c", iters=200, extra=late)))._last_window() is None
 
 
 def test_a_new_length_moves_every_schedule_as_a_run_of_that_length_has_them(tmp_path):
@@ -112,10 +117,28 @@ def replanned(tmp_path: Path, speed: float, low: int = 1, high: int = 10_000) ->
     """A run of 200 planned again after its window, its iterations timed at ``speed`` times the cost at which 200 fill
     its 60 s exactly (2 s spent): the trainer, the iterations done and the seconds per iteration timed."""
     trainer = Trainer(planned(tiny_trainer_config(tmp_path, iters=200), low, high))
-    start, at = trainer._replan_window()
+    start, at, _ = trainer._replan_window()
     per_iteration = speed * 58.0 / rest_seconds(trainer.config, 200, at, 1.0)
-    trainer._replan(at, [2.0 - per_iteration * (at - done) for done in range(start, at + 1)])
+    trainer._replan(at, [2.0 - per_iteration * (at - done) for done in range(start, at + 1)], last=False)
     return trainer, at, per_iteration
+
+
+@pytest.mark.parametrize(("speed", "longer"), [(1.3, False), (0.9, True), (0.5, True)])
+def test_the_last_replan_fits_the_rest_at_its_timed_speed_with_every_event_behind(tmp_path, speed, longer):
+    """Planned again after its last event (40 s spent), a run times what each further iteration costs: the longest
+    count whose rest fits the plan's 60 s at that cost and keeps every event behind it."""
+    trainer = Trainer(planned(tiny_trainer_config(tmp_path, iters=200)))
+    start, at, _ = trainer._last_window()
+    per_iteration = speed * 20.0 / (200 - at)
+    trainer._replan(at, [40.0 - per_iteration * (at - done) for done in range(start, at + 1)], last=True)
+    n = trainer.config.max_num_iterations
+
+    def allowed(count: int) -> bool:
+        return 40.0 + (count - at) * per_iteration <= 60.0 and max(trainer._event_steps(count)) < at
+
+    assert (n > 200) == longer and allowed(n) and not allowed(n + 1)
+    assert trainer.pipeline.model.max_iters == trainer.pipeline.datamanager.max_iters == n
+    assert trainer.config.planned_train_seconds == pytest.approx(40.0 + (n - at) * per_iteration)
 
 
 @pytest.mark.parametrize(("speed", "longer"), [(1.3, False), (0.8, True)])

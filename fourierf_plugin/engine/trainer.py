@@ -332,15 +332,17 @@ class Trainer:
 
     # -- the run's length, planned again from its own speed --------------------------------------------------------
     def _replan_window(self) -> ReplanWindow | None:
-        """Where a fresh ``--time-budget`` run first times its own iterations and plans its length again:
-        ``REPLAN_SHARE`` of the way to its first count-dependent event, so that a shorter run still has every event
-        ahead of it; None without a length plan, on resume, or for too few steps (the last window may still come)."""
+        """Where a fresh ``--time-budget`` run first times its own iterations and plans its length again: after its
+        warm-up (``START_STEPS`` past any event among its first steps, such as a ray batch's first stages),
+        ``REPLAN_SHARE`` of the way to its next count-dependent event, so that a shorter run still has that event ahead
+        of it; None without a length plan, on resume, or for too few steps (the last window may still come)."""
         c = self.config
         if c.length_plan is None or self.start_step:
             return None
-        events = [s for s in self._event_steps(c.max_num_iterations) or () if s > 0]
-        to = math.floor(REPLAN_SHARE * min(events, default=c.max_num_iterations))
-        return ReplanWindow(START_STEPS, to, last=False) if to - START_STEPS >= MIN_TIMED_STEPS else None
+        events = [s for s in self._event_steps(c.max_num_iterations) or () if s > 0]  # one at 0 is the start's
+        start = START_STEPS + max((s + 1 for s in events if s < START_STEPS), default=0)
+        to = math.floor(REPLAN_SHARE * min((s for s in events if s >= start), default=c.max_num_iterations))
+        return ReplanWindow(start, to, last=False) if to - start >= MIN_TIMED_STEPS else None
 
     def _last_window(self) -> ReplanWindow | None:
         """Where a fresh ``--time-budget`` run times its iterations once every count-dependent event is behind it (its
@@ -365,17 +367,11 @@ class Trainer:
             return None
         return sorted(model.event_steps() + manager.stage_steps())
 
-    def _keeps_events(self, iterations: int, done: int, happened: list[int]) -> bool:
-        """Whether a run of ``iterations`` has exactly ``happened`` (this run's events) before ``done`` (no event that
-        happened moves, none still ahead falls before it)."""
+    def _events_behind(self, iterations: int, done: int) -> int | None:
+        """How many of a run of ``iterations``'s events come before ``done`` (None where its schedules do not fit).
+        Counts equal, the same events are behind: each is a fraction of the run or a fixed step."""
         then = self._event_steps(iterations)
-        return then is not None and [s for s in then if s < done] == happened
-
-    def _keeps_all_behind(self, iterations: int, done: int) -> bool:
-        """Whether a run of ``iterations`` has every event before ``done`` (the last re-plan: the events happened, none
-        comes back ahead; where each falls in the past does not change the state)."""
-        then = self._event_steps(iterations)
-        return then is not None and all(s < done for s in then)
+        return None if then is None else sum(s < done for s in then)
 
     def _clock(self, started: float) -> float:
         """Seconds since ``started``, the device's queued work included."""
@@ -387,17 +383,17 @@ class Trainer:
         """Set the run's length to the count whose training fits its plan's time, ``stamps`` the clock after each
         iteration of its window: at their median seconds per iteration (which a hiccup of the machine moves little),
         the rest costing that per unit of grid side as the grid grows (``estimates.rest_seconds``) or, in the ``last``
-        window, that per iteration; within the short-run rules' span and without moving an event ahead of ``done`` or
-        back past it. Whether the length changed; said once, and logged."""
+        window (every event behind), that per iteration; within the short-run rules' span and without moving an event
+        ahead of ``done`` or back past it. Whether the length changed; said once, and logged."""
         c, plan, model = self.config, self.config.length_plan, self.pipeline.model
         assert plan is not None
         elapsed, per_iteration = stamps[-1], statistics.median(b - a for a, b in itertools.pairwise(stamps))
         current = c.max_num_iterations
-        if last:
-            keeps = functools.partial(self._keeps_all_behind, done=done)
-        else:
-            happened = [s for s in self._event_steps(current) or [] if s < done]
-            keeps = functools.partial(self._keeps_events, done=done, happened=happened)
+        behind = self._events_behind(current, done)
+
+        def keeps(iterations: int) -> bool:  # the events behind stay behind, those ahead stay ahead
+            return self._events_behind(iterations, done) == behind
+
         low = max(plan.low, *c.export_mesh_at, first_true(keeps, max(plan.low, done + 1), current))
         high = last_true(keeps, current, plan.high - 1)
 

@@ -357,7 +357,7 @@ def scene_tables(rows: Sequence[dict], scene: str, suite: harness.Suite) -> list
         "",
         *harness.titled_table(
             "Test PSNR / SSIM / LPIPS at each budget (too short: the budget does not fit the method's fewest "
-            "iterations):",
+            "iterations; —: not run at that budget):",
             ["method", *budgets],
             [harness.md_row([m, *(cell(here.get((m, b))) for b in budgets)]) for m in methods],
         ),
@@ -413,7 +413,7 @@ def equal_time_section(rows: Sequence[dict], suite: harness.Suite) -> list[str]:
     if cut:
         body += [
             f"Points stopped at their budget before the end of their schedules: {len(cut)}, after {min(cut):.0%} to "
-            f"{max(cut):.0%} of their planned iterations (those cost more than the opening steps timed).",
+            f"{max(cut):.0%} of their planned iterations (their iterations cost more than the run timed them at).",
             "",
         ]
     total, jobs = sum(r["seconds"] for r in rows), max(r["jobs"] for r in rows)

@@ -5,7 +5,8 @@ count it picks decides which rules apply, and every schedule stays a fraction of
 comes from timing a few real steps of the configured pipeline on a throwaway copy (``measure_first_steps``), scaled
 to the whole run by ``estimates.run_shape``; the budget covers the training loop only (setup, this timing and
 evaluation come on top). Once it trains, the run plans its length again from its own speed before its first
-count-dependent event, within the counts its short-run rules cover (``LengthPlan``, ``Trainer._replan``).
+count-dependent event and after its last, within the counts its short-run rules cover (``LengthPlan``,
+``Trainer._replan``).
 """
 
 from __future__ import annotations
@@ -153,8 +154,8 @@ class Plan:
             f"iteration (timed over {TIMED_STEPS} steps of this run's pipeline, scaled to the whole run), so "
             f"max_num_iterations={self.iterations}, planned training time {format_duration(self.planned_s)}; the "
             f"budget covers training only: setup, this timing ({format_duration(self.calibration_s)}) and evaluation "
-            "are not included; the run plans its length again from its own speed before its first event, and "
-            "should its iterations still cost more than planned, training stops and saves at the budget"
+            "are not included; the run plans its length again from its own speed before its first event and after "
+            "its last, and should its iterations still cost more than planned, training stops and saves at the budget"
         )
 
 

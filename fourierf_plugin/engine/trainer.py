@@ -335,25 +335,33 @@ class Trainer:
         """Where a fresh ``--time-budget`` run first times its own iterations and plans its length again: after its
         warm-up (``START_STEPS`` past any event among its first steps, such as a ray batch's first stages),
         ``REPLAN_SHARE`` of the way to its next count-dependent event, so that a shorter run still has that event ahead
-        of it; None without a length plan, on resume, or for too few steps (the last window may still come)."""
-        c = self.config
-        if c.length_plan is None or self.start_step:
+        of it; None for too few steps (the last window may still come)."""
+        events = self._planned_events()
+        if events is None:
             return None
-        events = [s for s in self._event_steps(c.max_num_iterations) or () if s > 0]  # one at 0 is the start's
+        events = [s for s in events if s > 0]  # one at 0 is the start's
         start = START_STEPS + max((s + 1 for s in events if s < START_STEPS), default=0)
-        to = math.floor(REPLAN_SHARE * min((s for s in events if s >= start), default=c.max_num_iterations))
+        to = math.floor(REPLAN_SHARE * min((s for s in events if s >= start), default=self.config.max_num_iterations))
         return ReplanWindow(start, to, last=False) if to - start >= MIN_TIMED_STEPS else None
 
     def _last_window(self) -> ReplanWindow | None:
         """Where a fresh ``--time-budget`` run times its iterations once every count-dependent event is behind it (its
-        grid final, its rays filtered: the cost the rest of the run has) and plans its length a last time; None
-        without a length plan, on resume, or where too few iterations follow its last event."""
+        grid final, its rays filtered: the cost the rest of the run has) and plans its length a last time; None where
+        too few iterations follow its last event."""
+        events, iterations = self._planned_events(), self.config.max_num_iterations
+        if events is None:
+            return None
+        start = max(events, default=0) + 1 + START_STEPS
+        to = start + max(MIN_TIMED_STEPS, math.ceil(LAST_TIMED_SHARE * iterations))
+        return ReplanWindow(start, to, last=True) if to < iterations else None
+
+    def _planned_events(self) -> list[int] | None:
+        """The event steps of a fresh ``--time-budget`` run at its current length; None without a length plan or on
+        resume (a resumed run keeps its length)."""
         c = self.config
         if c.length_plan is None or self.start_step:
             return None
-        start = max(self._event_steps(c.max_num_iterations) or [0]) + 1 + START_STEPS
-        to = start + max(MIN_TIMED_STEPS, math.ceil(LAST_TIMED_SHARE * c.max_num_iterations))
-        return ReplanWindow(start, to, last=True) if to < c.max_num_iterations else None
+        return self._event_steps(c.max_num_iterations) or []
 
     def _event_steps(self, iterations: int) -> list[int] | None:
         """The run's count-dependent event steps were it ``iterations`` long, from probes of its model and datamanager
@@ -539,8 +547,8 @@ START_STEPS, MIN_TIMED_STEPS = 5, 8
 """A ``--time-budget`` run's re-plan times its iterations after its first ``START_STEPS`` (allocations, first calls),
 and only when at least ``MIN_TIMED_STEPS`` come before it."""
 REPLAN_SHARE = 0.75
-"""How far towards its first count-dependent event a ``--time-budget`` run plans its length again: later times more
-steps, earlier leaves a shorter run room to keep that event ahead."""
+"""How far towards its first count-dependent event after its warm-up a ``--time-budget`` run plans its length again:
+later times more steps, earlier leaves a shorter run room to keep that event ahead."""
 LAST_TIMED_SHARE = 0.05
 """The share of a ``--time-budget`` run timed after its last event, before it plans its length a last time: enough
 steps for a steady median, most of the rest left to adjust."""
@@ -583,7 +591,7 @@ def set_run_length(config: TrainerConfig, model: FourieRFModel, manager: DataMan
 @dataclass
 class LengthPlan(InstantiateConfig):
     """What a ``--time-budget`` run plans its length again with, from its own speed before its first count-dependent
-    event (set by ``method_configs.time_budget``)."""
+    event and after its last (set by ``method_configs.time_budget``)."""
 
     train_seconds: float
     """The training time to fill: the budget less its margin."""

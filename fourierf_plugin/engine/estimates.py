@@ -77,12 +77,24 @@ RUN_TO_GROWTH = 0.9
 the growth leaves out (the field lights up, the occupancy updates shrink the box and filter the rays), fitted on an
 object and a forward-facing scene at the CPU sizing; an estimate, which ``time_budget.MARGIN`` covers."""
 
-REST_TO_GROWTH = {"euclidean": 0.62, "ndc": 1.3, "contracted": 1.0}
-"""A run's cost per iteration after its first events over its cost before them times the grid's growth, by the
-scene's ray space: an object's box (euclidean rays) is mostly empty, and once the occupancy grid skips that space an
-iteration costs far less than the growth says; a forward-facing scene (NDC) fills its frustum, and its planes' cost
-grows faster than their side. Fitted on the bundled lego and on fern at the CPU sizing (an unbounded scene, not
-fitted, takes the growth as it is); an estimate, which ``time_budget.MARGIN`` covers."""
+REST_TO_GROWTH = {
+    "grid": {"euclidean": 0.62, "ndc": 1.3, "contracted": 1.0},
+    "decoder": {"euclidean": 0.36, "ndc": 1.0, "contracted": 1.0},
+}
+"""A run's cost per iteration after its first events over its cost before them times the grid's growth, by what an
+iteration's cost follows and the scene's ray space. An object's box (euclidean rays) is mostly empty: once the
+occupancy grid skips that space an iteration costs far less than the growth says, and less still where a decoder at
+every sample (ZeroRF's, an MLP field's) is most of the cost, rather than a grid model's filtering of its whole
+grids. A forward-facing scene (NDC) fills its frustum, and a grid's planes cost more than their side as they grow.
+Fitted on the bundled lego and on fern at the CPU sizing (the rows or spaces not fitted, an unbounded scene's and a
+decoder's on NDC, take the growth as it is); an estimate, which ``time_budget.MARGIN`` and the last re-plan cover."""
+
+
+def cost_kind(model: Any) -> str:
+    """What an iteration's cost of a model config follows (a key of ``REST_TO_GROWTH``): a decoder at every sample
+    (generated factors, an MLP field) or the grids."""
+    return "decoder" if generator_config(model) is not None or mlp_config(model) is not None else "grid"
+
 
 SAVE_BYTES_PER_SECOND = 200e6
 """How fast a checkpoint is written (serialised and flushed to disk): an estimate for a local disk."""
@@ -116,9 +128,10 @@ def fitting_iterations(config: Any, done: int, seconds: float, available_s: floa
 def rest_seconds(config: Any, iterations: int, done: int, seconds_per_iteration: float) -> float:
     """What iterations ``done`` to ``iterations`` of a run of ``iterations`` cost, at ``seconds_per_iteration`` timed
     on its initial grid before any of its events (a ``--time-budget`` run's re-plan): that cost per unit of grid side,
-    times each iteration's side, times ``REST_TO_GROWTH`` of its scene."""
+    times each iteration's side, times ``REST_TO_GROWTH`` of its cost's kind and its scene."""
     sides = iterations * grid_growth(config, iterations=iterations) - done * grid_growth(config, done, iterations)
-    return seconds_per_iteration * sides * REST_TO_GROWTH[config.pipeline.effects.ray_space]
+    ratio = REST_TO_GROWTH[cost_kind(config.pipeline.model)][config.pipeline.effects.ray_space]
+    return seconds_per_iteration * sides * ratio
 
 
 def run_shape(config: Any) -> float:

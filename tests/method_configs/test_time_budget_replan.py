@@ -11,8 +11,9 @@ import pytest
 import torch
 
 from fourierf_plugin.configs.base import load_config
+from fourierf_plugin.data.scene_effects import RaySpace
 from fourierf_plugin.engine.checkpoint import list_checkpoints, load_latest_checkpoint
-from fourierf_plugin.engine.estimates import rest_seconds
+from fourierf_plugin.engine.estimates import REST_TO_GROWTH, cost_kind, rest_seconds
 from fourierf_plugin.engine.trainer import (
     MIN_TIMED_STEPS,
     START_STEPS,
@@ -21,7 +22,7 @@ from fourierf_plugin.engine.trainer import (
     TrainerConfig,
     set_run_length,
 )
-from fourierf_plugin.method_configs import config_registry
+from fourierf_plugin.method_configs import all_methods, config_registry
 from fourierf_plugin.method_configs.time_budget import pinned_steps
 from fourierf_plugin.pipelines.base import Pipeline
 from fourierf_plugin.scripts.train import build_config, parse_args
@@ -205,3 +206,13 @@ def test_a_value_the_user_typed_is_not_pinned(tmp_path):
     extra = ["--scene-preset", "real", "--pipeline.model.fourier.ramp-fraction", "0.5"]
     config = tiny_trainer_config(tmp_path, iters=1337, extra=extra)
     assert [path.rsplit(".", 1)[-1] for path, _, _ in pinned_steps(config, "white")] == ["occupancy_update_fractions"]
+
+
+def test_every_model_has_a_rest_ratio_for_every_ray_space_and_a_decoder_culls_more_of_an_object():
+    """Each preset's cost kind has a ratio for every ray space; a decoder at every sample (zerorf-vm, freenerf) is
+    most of its iteration, so skipping an object's empty box cuts its rest more than a grid model's."""
+    kinds = {name: cost_kind(config.pipeline.model) for name, config in all_methods.items()}
+    assert {kinds["zerorf-vm"], kinds["freenerf"]} == {"decoder"}
+    assert {kinds["fourierf-vm"], kinds["fourierf-cp"], kinds["tensorf-vm"]} == {"grid"}
+    assert all(set(REST_TO_GROWTH[kind]) == set(RaySpace.__args__) for kind in kinds.values())
+    assert REST_TO_GROWTH["decoder"]["euclidean"] < REST_TO_GROWTH["grid"]["euclidean"]

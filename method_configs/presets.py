@@ -177,11 +177,11 @@ FREENERF_BLENDER_LR_DECAY = 0.1 ** (50_000 / 500_000)
 
 
 def _freenerf() -> TrainerConfig:
-    """FreeNeRF on this pipeline's parsers, sampler and evaluation: its MLP with the frequency mask opening over 90 %
-    of the run and its occlusion term (``models.freenerf``), view-dependent colour, and its Blender optimiser (Adam
-    (0.9, 0.999) at 5e-4, decaying to 0.79, no clipping); on a forward-facing scene its LLFF values instead
-    (``scene_presets.FREENERF_REAL_SCENE_SETTINGS``). Samples are this pipeline's steps through the occupancy grid,
-    not FreeNeRF's coarse and fine networks (``models.freenerf``). No short-run rule: the rules are a grid's."""
+    """FreeNeRF on this pipeline's parsers and evaluation: its MLP with the frequency mask opening over 90 % of the
+    run and its occlusion term (``models.freenerf``), view-dependent colour, and its Blender optimiser (Adam
+    (0.9, 0.999) at 5e-4, decaying to 0.79, no clipping), sampled through the occupancy grid, which skips an object's
+    empty box; on a forward-facing scene its LLFF values and sampler instead, mip-NeRF's two levels
+    (``scene_presets.FREENERF_REAL_SCENE_SETTINGS``). No short-run rule: the rules are a grid's."""
     optimizer = OptimizerConfig(
         lr_networks=5e-4, betas=(0.9, 0.999), weight_decay=0.0, lr_decay_ratio=FREENERF_BLENDER_LR_DECAY
     )

@@ -54,18 +54,18 @@ FREENERF_LLFF_ITERATIONS = 69_768
 """The length of FreeNeRF's LLFF run with 3 views (``configs/freenerf/llff3_freenerf.gin``)."""
 FREENERF_REAL_SCENE_SETTINGS: dict[str, Any] = {
     # FreeNeRF's LLFF config (RegNeRF's optimiser): Adam 2e-3 -> 2e-5 log-linear, a 512-step warm-up from 0.01 of
-    # the lr, gradients clipped to 0.1 by value and by norm, noise of std 1 on the raw density; the pipeline's schedule.
+    # the lr, gradients clipped to 0.1 by value and by norm, noise of std 1 on the raw density; mip-NeRF's two levels
+    # of 128 samples (a frustum the occupancy grid could not thin), so no occupancy updates or upsamples.
     "pipeline.model.mlp.density_noise": 1.0,
+    "pipeline.model.samples_per_level": 128,
+    "pipeline.model.occupancy_update_fractions": (),
+    "pipeline.model.field.upsample_fractions": (),
     "optimizer.lr_networks": 2e-3,
     "optimizer.lr_decay_ratio": 0.01,
     "optimizer.lr_warmup_fraction": 512 / FREENERF_LLFF_ITERATIONS,
     "optimizer.lr_warmup_start": 0.01,
     "optimizer.grad_clip_value": 0.1,
     "optimizer.grad_clip_norm": 0.1,
-    **{
-        path: REAL_SCENE_SETTINGS[path]
-        for path in ("pipeline.model.occupancy_update_fractions", "pipeline.model.field.upsample_fractions")
-    },
 }
 OWN_REAL_SCENE_SETTINGS: dict[str, dict[str, Any]] = {
     "tensorf-vm-published": PUBLISHED_TENSORF_REAL_SCENE_SETTINGS,

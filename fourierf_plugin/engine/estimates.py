@@ -10,7 +10,7 @@ from fourierf_plugin.engine.option_checks import grid_values
 from fourierf_plugin.field_components.generator import parameter_count
 from fourierf_plugin.field_components.schedules import steps_from_fractions, voxel_counts
 from fourierf_plugin.fields.mlp_field import parameter_count as mlp_parameter_count
-from fourierf_plugin.models.freenerf import mlp_config
+from fourierf_plugin.models.freenerf import LEVELS, mlp_config
 from fourierf_plugin.models.zerorf import generator_config
 from fourierf_plugin.utils.console import format_duration
 
@@ -47,11 +47,12 @@ measured on the bundled scene before the first occupancy update: an estimate, no
 
 
 def mlp_seconds_per_iteration(config: Any, rays: float) -> float:
-    """An MLP field's iteration: every sample of the box (the sampler's step through the run's mean grid, before the
-    occupancy grid skips empty space: an upper bound) through the whole network."""
+    """An MLP field's iteration: every sample through the whole network, its two levels' samples (FreeNeRF's sampler)
+    or every step through the box (the sampler's step through the run's mean grid, before the occupancy grid skips
+    empty space: an upper bound)."""
     model = config.pipeline.model
     side = model.field.n_voxels_init ** (1.0 / 3.0) * grid_growth(config)
-    samples = math.sqrt(3.0) * side / model.step_ratio
+    samples = LEVELS * model.samples_per_level or math.sqrt(3.0) * side / model.step_ratio
     return rays * samples * mlp_parameter_count(model.mlp) * SECONDS_PER_MLP_WEIGHT
 
 

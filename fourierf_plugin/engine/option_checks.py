@@ -158,6 +158,9 @@ MLP_RULES: tuple[Rule, ...] = (
     Rule(f"{_MLP}.density_bias", lambda v: _number(v), "a finite number", "-1"),
     Rule(f"{_MLP}.density_noise", at_least(0.0), "a standard deviation >= 0 (0 = none)", "1.0"),
     Rule(f"{_MLP}.rgb_padding", within(0.0, 0.5), "a padding in [0, 0.5]", "0.001"),
+    Rule(f"{_MODEL}.samples_per_level", int_at_least(0), "an integer >= 0 (0 = march the occupancy grid)", "128"),
+    Rule(f"{_MODEL}.coarse_loss_weight", at_least(0.0), "a weight >= 0", "0.1"),
+    Rule(f"{_MODEL}.resample_padding", at_least(0.0), "a padding >= 0", "0.01"),
 )
 """FreeNeRF's MLP options (only where the model has an MLP field)."""
 
@@ -244,6 +247,8 @@ def check_mlp_options(config: Any) -> None:
 MLP_SAMPLING_OPTIONS = ("n_voxels_init", "n_voxels_final", "upsample_fractions")
 """The ``field`` options an MLP field reads: the size and schedule of the grid the sampler and occupancy grid use."""
 MLP_IGNORED = ("optimizer.lr_grids", "optimizer.lr_generator", "optimizer.generator_grad_clip")
+LEVELS_IGNORED = (f"{_MODEL}.step_ratio", f"{_MODEL}.occupancy_update_fractions")
+"""Sampling options that FreeNeRF's two levels (``samples_per_level``) do not read, beside the grid's ``field`` ones."""
 """Optimiser options of parameter groups an MLP field does not have (its one group is ``networks``)."""
 
 
@@ -260,6 +265,15 @@ def check_mlp_flags(config: Any, given: frozenset[str]) -> None:
         or path.startswith(fourier)
         or path in MLP_IGNORED
     )
+    levels = config.pipeline.model.samples_per_level
+    sampling = [p for p in given if p in LEVELS_IGNORED or p.startswith(field)] if levels and not unread else []
+    if sampling:
+        flags = " ".join(flag_of(path) for path in sorted(sampling))
+        fail(
+            f"{flags}: set the grid freenerf steps through and its occupancy grid, which FreeNeRF's two levels "
+            f"({flag_of(f'{_MODEL}.samples_per_level')} {levels}) do not use",
+            f"drop {flags}, or pass {flag_of(f'{_MODEL}.samples_per_level')} 0 to march the occupancy grid",
+        )
     if unread:
         flags = " ".join(flag_of(path) for path in unread)
         fail(

@@ -133,11 +133,20 @@ class MLPField(PreparedField):
         trunk = self.trunk_features(xyz)
         if self.recording:
             self.recorded = trunk
+        return self.density_from_trunk(trunk)
+
+    def density_from_trunk(self, trunk: Tensor) -> Tensor:
+        """σ ≥ 0 from the trunk's output [N, width] at the points (with the training noise on the raw value)."""
         raw = self.density_head(trunk).squeeze(-1)
         if self.training and self.config.density_noise > 0:
             noise = torch.randn(raw.shape, generator=self.noise_generator, device=raw.device, dtype=raw.dtype)
             raw = raw + self.config.density_noise * noise
         return F.softplus(raw + self.config.density_bias)
+
+    def radiance(self, xyz: Tensor, directions: Tensor | None) -> tuple[Tensor, Tensor]:
+        """σ [N] and colour [N, 3] at world points [N, 3] from one pass through the trunk (NeRF's network)."""
+        trunk = self.trunk_features(xyz)
+        return self.density_from_trunk(trunk), self.rgb_from_trunk(trunk, directions)
 
     def rgb(self, xyz: Tensor, directions: Tensor | None) -> Tensor:
         """Colour in [0, 1] (padded) at world points [N, 3]; ``directions`` unit [N, 3], read when view-dependent."""

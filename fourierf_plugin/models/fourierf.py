@@ -293,12 +293,18 @@ class FourieRFModel(nn.Module):
             rays = TrainingRays(
                 sigma, samples.t, samples.deltas, weights, acc, self.near, self.far, self.config.distance_scale
             )
-            for regulariser in self.regularisers:
-                if terms is None or regulariser.name in terms:
-                    term = regulariser.ray_term(rays)
-                    if term is not None:
-                        out[regulariser.name] = term
+            out |= self.ray_terms(rays, terms)
         return out
+
+    def ray_terms(self, rays: TrainingRays, terms: Collection[str] | None) -> dict[str, Tensor]:
+        """Each regulariser's term on a training render's rays, by name (only those named in ``terms`` when given)."""
+        found = {}
+        for regulariser in self.regularisers:
+            if terms is None or regulariser.name in terms:
+                term = regulariser.ray_term(rays)
+                if term is not None:
+                    found[regulariser.name] = term
+        return found
 
     def draw_background(self, num_rays: int, device: torch.device | str) -> Tensor:
         """The background of a batch of ``num_rays`` rays: this step's training one (one coin per batch, or a colour

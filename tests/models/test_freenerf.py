@@ -14,12 +14,15 @@ from pathlib import Path
 import pytest
 import torch
 
+from fourierf_plugin.data.scene_effects import SceneEffects
 from fourierf_plugin.engine.estimates import checkpoint_bytes, estimate_seconds
 from fourierf_plugin.engine.optimizers import OptimizerConfig, warmup_scale
 from fourierf_plugin.engine.trainer import Trainer
 from fourierf_plugin.fields.mlp_field import MLPFieldConfig, parameter_count
 from fourierf_plugin.method_configs import all_methods
 from fourierf_plugin.method_configs.budget import Run, rules_for
+from fourierf_plugin.model_components import losses
+from fourierf_plugin.model_components.rendering import composite_target
 from fourierf_plugin.models.fourierf import FourieRFModel
 from fourierf_plugin.models.freenerf import FreeNeRFModelConfig
 from fourierf_plugin.scripts import train as train_script
@@ -55,17 +58,24 @@ SMALL_MLP = [
 """A network a tiny run trains in seconds (the preset's is 8 × 256)."""
 
 
-def _model(max_iters: int = 100) -> torch.nn.Module:
-    config = FreeNeRFModelConfig(mlp=MLPFieldConfig(depth=2, width=8, skip=0, view_width=8))
+def _model(max_iters: int = 100, effects: SceneEffects = BLENDER, **options: object) -> torch.nn.Module:
+    config = FreeNeRFModelConfig(mlp=MLPFieldConfig(depth=2, width=8, skip=0, view_width=8), **options)
     box = torch.tensor([[-1.5] * 3, [1.5] * 3])
     return config.setup(
         scene_box=box,
         near=2.0,
         far=6.0,
-        effects=BLENDER,
+        effects=effects,
         max_iters=max_iters,
         generator=torch.Generator().manual_seed(0),
     )
+
+
+def _rays(count: int = 16) -> tuple[torch.Tensor, torch.Tensor]:
+    """Rays from y = -4 towards the box's middle, slightly spread."""
+    origins = torch.tensor([[0.0, -4.0, 0.3]]).repeat(count, 1)
+    spread = torch.randn(count, 3, generator=torch.Generator().manual_seed(1)) * 0.1
+    return origins, torch.nn.functional.normalize(spread + torch.tensor([0.0, 1.0, 0.0]), dim=-1)
 
 
 def _masks(model: torch.nn.Module, step: int) -> tuple[list[float], list[float]]:
@@ -103,11 +113,7 @@ def test_the_colour_reuses_the_density_pass_with_the_same_numbers_and_gradients(
         calls = []
         model.field.trunk[0].register_forward_hook(lambda *_, seen=calls: seen.append(1))
         model.prepare(50)
-        origins = torch.tensor([[0.0, -4.0, 0.3]]).repeat(16, 1)
-        directions = torch.nn.functional.normalize(
-            torch.randn(16, 3, generator=torch.Generator().manual_seed(1)) * 0.1 + torch.tensor([0.0, 1.0, 0.0]), dim=-1
-        )
-        out = model(origins, directions, jitter=torch.Generator().manual_seed(2))
+        out = model(*_rays(), jitter=torch.Generator().manual_seed(2))
         out["rgb"].sum().backward()
         results.append((out["rgb"].detach(), model.field.trunk[0].weight.grad.clone(), len(calls)))
     (rgb_a, grad_a, calls_a), (rgb_b, grad_b, calls_b) = results
@@ -115,6 +121,37 @@ def test_the_colour_reuses_the_density_pass_with_the_same_numbers_and_gradients(
     torch.testing.assert_close(grad_a, grad_b)
     assert (calls_a, calls_b) == (1, 2)
     assert grad_a.abs().sum() > 0 and (rgb_a < 0.999).any(), "the rays hit the field's fog"
+
+
+def test_two_levels_score_both_colours_penalise_the_second_and_train_the_network() -> None:
+    """FreeNeRF's sampler: the render is the second level's, the first level's colour is scored at 0.1 of the MSE,
+    the occlusion term reads the second level, and the gradient of every term reaches the network."""
+    effects = replace(BLENDER, occlusion_regularization=True)
+    model = _model(100, effects, samples_per_level=16)
+    model.train()
+    model.prepare(95)
+    out = model(*_rays(), jitter=torch.Generator().manual_seed(2))
+    assert model.samples_per_ray(training=True) == 32
+    assert {"rgb", "rgb_coarse", "accumulation", "depth", "occlusion"} <= set(out)
+    target = torch.rand(16, 4, generator=torch.Generator().manual_seed(3))
+    terms = model.loss_dict(out, target, 95)
+    expected = 0.1 * losses.mse(out["rgb_coarse"], composite_target(target, out["background"]))
+    torch.testing.assert_close(terms["mse_coarse"], expected)
+    assert not torch.equal(out["rgb"], out["rgb_coarse"]), "the second level samples other points"
+    torch.stack(list(terms.values())).sum().backward()
+    grad = model.field.trunk[0].weight.grad
+    assert torch.isfinite(grad).all() and grad.abs().sum() > 0
+
+
+def test_two_levels_render_the_same_picture_every_time_inside_near_and_far() -> None:
+    model = _model(100, samples_per_level=16)
+    origins, directions = _rays()
+    first = model.render_rays(origins, directions, step=100)
+    second = model.render_rays(origins, directions, step=100)
+    for key in ("rgb", "accumulation", "depth"):
+        torch.testing.assert_close(first[key], second[key], rtol=0.0, atol=0.0)
+    assert ((first["depth"] >= 2.0) & (first["depth"] <= 6.0)).all()
+    assert ((first["rgb"] >= 0.0) & (first["rgb"] <= 1.0)).all()
 
 
 def test_warmup_rises_from_its_start_to_one() -> None:
@@ -166,6 +203,12 @@ def test_the_cost_estimate_counts_the_network_per_sample() -> None:
         (["--optimizer.lr-warmup-fraction", "2"], "--optimizer.lr-warmup-fraction"),
         (["--pipeline.model.field.density-components", "4", "4", "4"], "--pipeline.model.field.density-components"),
         (["--optimizer.lr-grids", "0.1"], "--optimizer.lr-grids"),
+        (["--pipeline.model.samples-per-level", "-1"], "--pipeline.model.samples-per-level"),
+        (["--pipeline.model.resample-padding", "-0.01"], "--pipeline.model.resample-padding"),
+        (
+            ["--pipeline.model.samples-per-level", "8", "--pipeline.model.step-ratio", "0.5"],
+            "--pipeline.model.step-ratio",
+        ),
         (["--pipeline.model.fourier.f0-density", "0.1"], "--pipeline.model.fourier.f0-density"),
     ],
 )
@@ -226,6 +269,14 @@ def test_a_resumed_run_ends_where_an_uninterrupted_run_ends(tmp_path: Path) -> N
 
 
 @pytest.mark.slow
+def test_a_resumed_run_of_two_levels_ends_where_an_uninterrupted_run_ends(tmp_path: Path) -> None:
+    """FreeNeRF's sampler draws both levels from the step's generator: resuming at 10 of 20 changes nothing."""
+    flags = [*SMALL_MLP, "--pipeline.model.samples-per-level", "8"]
+    uninterrupted, resumed = resumed_and_uninterrupted(tmp_path, "freenerf", 20, 10, flags)
+    assert_same_model_state(uninterrupted, resumed)
+
+
+@pytest.mark.slow
 def test_a_forward_facing_scene_takes_freenerfs_llff_values_and_trains_in_ndc(tmp_path: Path) -> None:
     fern = require_shared("data", "llff", "fern")
     args = [
@@ -234,7 +285,9 @@ def test_a_forward_facing_scene_takes_freenerfs_llff_values_and_trains_in_ndc(tm
     ]  # fmt: skip
     config, _ = build_config(parse_args(args))
     assert config.pipeline.effects.ray_space == "ndc" and config.pipeline.effects.occlusion_regularization
-    assert config.pipeline.model.mlp.density_noise == 1.0
+    model = config.pipeline.model
+    assert model.mlp.density_noise == 1.0 and model.samples_per_level == 128, "FreeNeRF's LLFF values and sampler"
+    assert model.occupancy_update_fractions == () and model.field.upsample_fractions == ()
     optimizer = config.optimizer
     assert (optimizer.lr_networks, optimizer.lr_decay_ratio, optimizer.lr_warmup_start) == (2e-3, 0.01, 0.01)
     assert optimizer.grad_clip_value == optimizer.grad_clip_norm == 0.1

@@ -23,10 +23,7 @@ SOURCES = ("fourierf_plugin", "method_configs", "data/parsers")
 INSTALLED = {"method_configs": "fourierf_plugin/method_configs", "data/parsers": "fourierf_plugin/data/parsers"}
 MODULE = (sys.executable, "-P", "-m")
 SIDES = ("old", "new")
-
-
-SCENES = {  # per scene: its folder under <shared>/data, method flags beyond P-CPU's sizes, parser flags, and its
-    # BENCHMARKS.md section's title and marker
+SCENES = {  # per scene: its data under <shared>/data, flags beyond P-CPU's sizes, parser flags, section title, marker
     "lego": {"data": "blender/lego", "flags": harness.OFFICIAL_OPTIMISER, "parser": harness.PCPU_LEGO_PARSER,
              "title": "Speed A/B of a change to a default (lego, interleaved)", "marker": "ab_speed"},
     "fern": {"data": "llff/fern", "flags": [], "parser": ["llff-data", "--num-views", "3"],
@@ -97,9 +94,7 @@ def revision_label(rev: str | None) -> str:
     return f"the working tree on {head}" + (", with uncommitted changes" if dirty else "")
 
 
-def run_side(
-    code: Path, label: str, seed: int, work: Path, shared: Path, scene: str, flags: Sequence[str] = ()
-) -> dict:
+def run_side(code: Path, label: str, seed: int, work: Path, shared: Path, scene: str, flags: Sequence[str]) -> dict:
     """One P-CPU run of ``scene`` with the package in ``code`` and the side's ``flags``: its timings and PSNR."""
     env, data = dict(os.environ, PYTHONPATH=str(code)), SCENES[scene]
     sizes = ["--seed", str(seed), "--max-num-iterations", "800", "--log-every", "50", *harness.GRID_FLAGS]
@@ -110,13 +105,10 @@ def run_side(
     result, _ = harness.eval_report(run_dir, work, label, "--render-dir", "none", "--lpips-weights", lpips, env=env,
                                     program=(*MODULE, "fourierf_plugin.scripts.eval"))  # fmt: skip
     return {
-        "label": label,
-        "seed": seed,
-        "train_wall_s": wall,
+        "label": label, "seed": seed, "train_wall_s": wall,
         "final_s_per_it": harness.seconds_per_iteration(harness.elapsed_by_step(records), *FINAL),
-        "render_s": result["timings"]["render_seconds_total"],
-        "psnr": result["results"]["psnr"],
-    }
+        "render_s": result["timings"]["render_seconds_total"], "psnr": result["results"]["psnr"],
+    }  # fmt: skip
 
 
 def time_iterations(code: Path, run_dir: Path, step: int = 700, warmup: int = 5, iters: int = 40) -> float:
@@ -162,8 +154,7 @@ def summary(rows: list[dict], timings: dict[str, list[float]], meta: dict) -> li
 
 def write_report(work: Path, markdown: Path) -> None:
     """Write the BENCHMARKS.md section of the A/B recorded in ``work`` (results.jsonl, iterations.json, meta.json)."""
-    missing = [name for name in ("results.jsonl", "iterations.json", "meta.json") if not (work / name).is_file()]
-    if missing:
+    if missing := [name for name in ("results.jsonl", "iterations.json", "meta.json") if not (work / name).is_file()]:
         sys.exit(f"error: no A/B recorded in {work} (missing {', '.join(missing)}); run the A/B first")
     timings, meta = (json.loads((work / name).read_text()) for name in ("iterations.json", "meta.json"))
     # a record without a scene is lego's

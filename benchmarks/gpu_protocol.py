@@ -31,10 +31,8 @@ def protocols(shared: Path, tiny: bool) -> dict[str, tuple[Path, list[str]]]:
 
 
 def run(name: str, scene: Path, parser: list[str], args: argparse.Namespace) -> dict:
-    device = ["--device", args.device]
-    run_dir, records, wall, rss = harness.train_run(
-        scene, args.work, name, *device, *(TINY if args.tiny else SIZES), *parser
-    )
+    device, sizes = ["--device", args.device], TINY if args.tiny else SIZES
+    run_dir, records, wall, rss = harness.train_run(scene, args.work, name, *device, *sizes, *parser)
     elapsed, done = harness.elapsed_by_step(records), harness.done_record(records) or {}
     steps = sorted(elapsed)
     tail = [s for s in steps if s >= 0.8 * steps[-1]]

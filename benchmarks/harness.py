@@ -31,6 +31,7 @@ LPIPS = "lpips/lpips_alex_v0.1.pth"  # the LPIPS-alex weights, under --shared
 LEGO_VIEWS = ("27", "76", "97", "99")
 PCPU_LEGO_PARSER = ["blender-data", "--downscale", "4", "--test-every", "8", "--view-ids", *LEGO_VIEWS]  # 100×100
 OFFICIAL_OPTIMISER = ["--optimizer.weight-decay", "0", "--optimizer.lr-decay-ratio", "1.0"]  # as the official code
+Flags = Sequence[str]  # command-line arguments
 
 
 def size_flags(rays: int, grid: tuple[int, int]) -> list[str]:
@@ -166,13 +167,7 @@ class Run:
 
 
 def train_and_eval(
-    run: Run,
-    data: Path,
-    parser_args: Sequence[str],
-    work: Path,
-    lpips: Path,
-    extra: Sequence[str] = (),
-    threads: int | None = None,
+    run: Run, data: Path, parser_args: Flags, work: Path, lpips: Path, extra: Flags = (), threads: int | None = None
 ) -> dict:
     """Train one run, evaluate it on the test split: its result row. ``threads`` caps torch's CPU threads in both."""
     out_dir = work / "runs"
@@ -194,7 +189,7 @@ def train_and_eval(
 
 
 def train_command(
-    run: Run, data: Path, out: Path, parser_args: Sequence[str], extra: Sequence[str] = (), threads: int | None = None
+    run: Run, data: Path, out: Path, parser_args: Flags, extra: Flags = (), threads: int | None = None
 ) -> list[str]:
     """The ``fourierf-train`` command of one run: its sizes, then ``extra`` (later flags win), the parser last."""
     flags = ["--seed", str(run.seed), *run.sizes(), *extra, *thread_flags(threads), *parser_args]
@@ -275,8 +270,7 @@ def run_all(jobs: Sequence[Job], path: Path, at_once: int = 1, again: str | None
 def record(path: Path, row: dict, again: str | None = None) -> None:
     """Append a finished row; run ``--again``, a recorded key's earlier row moves to ``repeats.jsonl`` with the note."""
     held = load_results(path) if again else {}
-    earlier = held.pop(row["key"], None)
-    if earlier is not None:
+    if (earlier := held.pop(row["key"], None)) is not None:
         write_jsonl(path.with_name(REPEATS), [earlier | {"repeat": again}], "a")
         write_jsonl(path.with_suffix(".tmp"), held.values())
         path.with_suffix(".tmp").replace(path)  # atomically
@@ -331,13 +325,8 @@ def write_section(markdown: Path, name: str, script: str, body: list[str]) -> No
 
 def section_head(title: str, command: str, settings: str | None = None, machine: str | None = None) -> list[str]:
     """A BENCHMARKS.md section's opening lines: title, machine (this one unless given) and command, what was run."""
-    return [
-        f"## {title}",
-        "",
-        f"Machine: {machine or machine_description()}. Command: `{command}`.",
-        *([settings] if settings else []),
-        "",
-    ]
+    machine_line = f"Machine: {machine or machine_description()}. Command: `{command}`."
+    return [f"## {title}", "", machine_line, *([settings] if settings else []), ""]
 
 
 def machine_description() -> str:
@@ -413,9 +402,8 @@ def setting_flags(setting: str) -> list[str]:
             flags += suite.tokens[token]
         elif match and match[1] in suite.valued:
             n = int(float(match[2]))
-            flags += [
-                f.format(v=match[2], v3=3 * n, cube=n**3, half_cube=(n // 2) ** 3) for f in suite.valued[match[1]]
-            ]
+            values = {"v": match[2], "v3": 3 * n, "cube": n**3, "half_cube": (n // 2) ** 3}
+            flags += [flag.format(**values) for flag in suite.valued[match[1]]]
         else:
             known = f"{', '.join(suite.tokens)}, or one of {', '.join(suite.valued)} and a number"
             raise ValueError(f"{setting}: no such token {token!r}; a token is {known}")

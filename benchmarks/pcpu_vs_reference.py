@@ -21,9 +21,8 @@ EVAL_EVERY = 80  # 10 % of the run
 def reference_run(shared: Path, seed: int, work: Path) -> dict:
     """One reference run (its log ``work/reference-SEED.log``); the fields of its RESULT line as numbers."""
     log, env = work / f"reference-{seed}.log", dict(os.environ, PCPU_OUT=str(work / "peer-runs"))
-    proc = subprocess.run(
-        ["bash", str(shared / "peer" / "run_pcpu.sh"), "fourierf", str(seed)], capture_output=True, text=True, env=env
-    )
+    cmd = ["bash", str(shared / "peer" / "run_pcpu.sh"), "fourierf", str(seed)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
     log.write_text(proc.stdout + proc.stderr)
     lines = [line for line in proc.stdout.splitlines() if line.startswith("RESULT ")]
     if proc.returncode != 0 or not lines:
@@ -49,12 +48,9 @@ def our_run(shared: Path, seed: int, work: Path) -> dict:
         curve[step] = harness.eval_report(run_dir, work, f"ours-{seed}.step{step}", *flags)[0]["results"]["psnr"]
     return {
         "train_wall_s": harness.done_record(records)["train_seconds"],  # type: ignore[index]
-        "final_phase_s_per_it": harness.seconds_per_iteration(elapsed, 600, 800),
-        "test_psnr": curve[800],
-        "peak_rss_gb": rss,
-        "psnr_curve": curve,
-        "elapsed": {step: elapsed[step] for step in curve},
-    }
+        "final_phase_s_per_it": harness.seconds_per_iteration(elapsed, 600, 800), "test_psnr": curve[800],
+        "peak_rss_gb": rss, "psnr_curve": curve, "elapsed": {step: elapsed[step] for step in curve},
+    }  # fmt: skip
 
 
 def section(rows: list[dict]) -> list[str]:

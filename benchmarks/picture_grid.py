@@ -24,8 +24,7 @@ def columns(config: Path, split: str, views: int, names: Sequence[str] = ()) -> 
     """The split's views ``names`` (else its first ``views``) rendered, the names checked before a view renders."""
     run = load_run(config, config_registry(), device="cpu")
     split_names = [view.name for view in run.pipeline.datamanager.eval_views(split)]
-    missing = [name for name in names if name not in split_names]
-    if missing:
+    if missing := [name for name in names if name not in split_names]:
         raise SystemExit(f"error: {config}: no view {', '.join(missing)} in its {split} split (it has {split_names})")
     wanted = list(names) or split_names[:views]
     return [

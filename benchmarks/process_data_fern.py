@@ -60,6 +60,7 @@ def trail(training: dict) -> float:
 
 def section(result: dict) -> list[str]:
     r = result
+    head = ("poses", "parser", "scene kind", "train views", "test PSNR", "SSIM", "LPIPS", "PSNR by seed")
     trainings = []  # one table row per parser
     for poses, parser in PARSERS:
         t = r["training"][parser]
@@ -85,9 +86,7 @@ def section(result: dict) -> list[str]:
         f"through the processed capture, seeds {', '.join(map(str, SEEDS))} (one thread each), evaluated on each "
         "one's every-8th test views; mean ± standard deviation over the seeds, then each seed's test PSNR:",
         "",
-        *harness.table(
-            ("poses", "parser", "scene kind", "train views", "test PSNR", "SSIM", "LPIPS", "PSNR by seed"), trainings
-        ),
+        *harness.table(head, trainings),
         "",
         f"process-data's capture trails fern's poses by {trail(r['training']):.2f} dB of mean test PSNR "
         f"(tolerance {TRAIN_TOLERANCE_DB} dB: {'met' if r['passed']['training'] else 'missed'}).",
@@ -106,14 +105,10 @@ def main() -> dict:
     names = [n for n in reference if n in estimated]
     errors = pose_errors(np.stack([estimated[n] for n in names]), np.stack([reference[n] for n in names]))
     result = {
-        "registered": len(report.registered),
-        "total": report.total,
-        "unregistered": report.unregistered,
-        "mean_reprojection_error_px": report.mean_reprojection_error,
-        "reference_extent": errors.reference_extent,
-        "wall_seconds": wall,
-        "machine": harness.cpu_and_cores(),
-    }
+        "registered": len(report.registered), "total": report.total, "unregistered": report.unregistered,
+        "mean_reprojection_error_px": report.mean_reprojection_error, "reference_extent": errors.reference_extent,
+        "wall_seconds": wall, "machine": harness.cpu_and_cores(),
+    }  # fmt: skip
     for name, values in (("rotation_deg", errors.rotation_deg), ("centre_percent", errors.centre_error_percent)):
         result |= {f"{name}_median": float(np.median(values)), f"{name}_max": float(np.max(values))}
     result["passed"] = {

@@ -42,9 +42,7 @@ def curve_table(results: dict[str, dict], suite: harness.Suite = SUITE) -> list[
     pairs = {(m, r["at_3000"]): r["at_800"] for m, r in suite.rule_along_the_budget.items()}
     pairs[(F, "lr0.08-tvconst-ramp0.2667-tv4")] = "lr0.08-tvconst-tv4"  # the band open by step 800 of 3000
     lines = []
-    for r in sorted(results.values(), key=lambda r: r["key"]):
-        if "curve" not in r:
-            continue
+    for r in sorted((r for r in results.values() if "curve" in r), key=lambda r: r["key"]):
         groups = harness.rows_by(results, r["scene"], suite.protocols[r["protocol"]].curve_of, r["method"])
         setting = r["setting"] if r["setting"] in groups else pairs.get((r["method"], r["setting"]), "")
         short = [x for x in groups.get(setting, []) if x["seed"] == r["seed"]]
@@ -63,31 +61,23 @@ def curve_table(results: dict[str, dict], suite: harness.Suite = SUITE) -> list[
     )
 
 
-def first_seed_row(results: dict[str, dict], protocol: str, method: str, setting: str, seed: int) -> dict | None:
+def first_seed(results: dict[str, dict], protocol: str, method: str, setting: str, suite: harness.Suite) -> dict | None:
     rows = harness.rows_by(results, "fern", protocol, method).get(setting, [])
-    return next((r for r in rows if r["seed"] == seed), None)
+    return next((r for r in rows if r["seed"] == suite.seeds[0]), None)
 
 
-def mid_along_the_budget(results: dict[str, dict], suite: harness.Suite = SUITE) -> list[str]:
-    """Fern at mid sizes and `lr0.08`, 800 against 3000 iterations, per method, first seed (mid-800's only one)."""
-    runs = {
-        m: [first_seed_row(results, p, m, "lr0.08", suite.seeds[0]) for p in ("mid-800", "mid-3000")]
-        for m in suite.methods
-    }
-    return [
+def along_the_budget(results: dict[str, dict], suite: harness.Suite = SUITE) -> list[str]:
+    """Fern, first seed, 800 against 3000 iterations: each method at mid sizes and `lr0.08` (mid-800's only seed), then
+    at the budget rule's settings at cpu sizes (does a user's run under the rule get better as the budget grows?)."""
+    runs = {m: [first_seed(results, p, m, "lr0.08", suite) for p in ("mid-800", "mid-3000")] for m in suite.methods}
+    lines = [
         f"- fern, {m}, mid sizes, `lr0.08`, 800 → 3000 iterations: val {short['val_psnr']:.2f} → "
         f"{long['val_psnr']:.2f}, test {short['psnr']:.2f} → {long['psnr']:.2f}"
         for m, (short, long) in runs.items()
         if short and long
     ]
-
-
-def rule_along_the_budget(results: dict[str, dict], suite: harness.Suite = SUITE) -> list[str]:
-    """Does a user's run under the budget rule get better as the budget grows from 800 to 3000 iterations?"""
-    lines = []
     for method, rule in suite.rule_along_the_budget.items():
-        a = first_seed_row(results, "cpu-800", method, rule["at_800"], suite.seeds[0])
-        b = first_seed_row(results, "cpu-3000", method, rule["at_3000"], suite.seeds[0])
+        a, b = (first_seed(results, f"cpu-{n}", method, rule[f"at_{n}"], suite) for n in (800, 3000))
         if a and b:
             lines.append(
                 f"- fern, {method}, the budget rule's settings at cpu sizes: `{rule['at_800']}` at 800 iterations val "
@@ -119,10 +109,8 @@ def targets_table(results: dict[str, dict], suite: harness.Suite = SUITE) -> lis
         at_least = f"≥ {floor:.1f} dB and " if floor is not None else ""
         cells = [f"`{picked[m]}`, {harness.fmt(list(test[m].values()), 2)} ({len(test[m])})" for m in (F, T)]
         status = "missed: " + ", ".join(short) if short else "met"
-        lines.append(
-            f"| {t['scene']}, {t['protocol']}: fourierf-vm {at_least}≥ +{t['lead']:.1f} dB; {t['against']} | "
-            f"{cells[0]} | {cells[1]} | **{lead:+.2f}** ({per_seed}) | {status} |"
-        )
+        target = f"{t['scene']}, {t['protocol']}: fourierf-vm {at_least}≥ +{t['lead']:.1f} dB; {t['against']}"
+        lines.append(harness.md_row([target, *cells, f"**{lead:+.2f}** ({per_seed})", status]))
     return harness.titled_table(
         "The quality targets, measured (test PSNR, mean ± std over the seeds; the lead per seed in brackets, seeds "
         f"{', '.join(map(str, suite.seeds))}; each choice made on val among the settings the baseline allows):",
@@ -150,9 +138,8 @@ def later_seeds_table(results: dict[str, dict], repeats: Sequence[dict], suite: 
         f"Settings run on seeds {', '.join(map(str, later))} on a GPU (an H100, several runs at once), beside "
         "their other runs: `-plain` is TensoRF's ReLU for the density, `-revive1` revives every dark batch (the "
         "budget rule's for a forward-facing run over 800 iterations), no suffix the field's default, which revives "
-        "a field only when it is dead. GPU training is not bit-reproducible "
-        "(grid_sample's CUDA backward accumulates with atomics), so a repeat of one setting and seed is the spread "
-        "a difference must clear.",
+        "a field only when it is dead. GPU training is not bit-reproducible (grid_sample's CUDA backward accumulates "
+        "with atomics), so a repeat of one setting and seed is the spread a difference must clear.",
         ["scene", "protocol", "method", "setting", *(f"seed {seed}: val / test" for seed in later), "mean val / test"],
         lines,
     )
@@ -206,21 +193,18 @@ def quality_section(results: dict[str, dict], repeats: Sequence[dict], suite: ha
         "python benchmarks/run.py sweep|seeds|curve, then python benchmarks/report.py",
         "Protocols, scenes and settings: `benchmarks/suite.toml` (a protocol is named by its sizes and iterations: "
         "cpu, what a CPU run gets by default (P-CPU in the speed sections); mid, the largest that trains in about 20 "
-        f"minutes on 2 cores). {views}. "
-        f"Each method at its own val-chosen setting (best mean val PSNR over seeds {', '.join(map(str, seeds))} "
-        f"among the settings run on all of them, else best val PSNR of seed {seeds[0]}); test PSNR of that setting "
-        "only, mean ± std over the seeds run. PSNRs agree across devices up to float rounding and random streams. "
-        "Training seconds are the device's and were taken while other work shared the machine: they are no speed "
-        "measurement (the speed benchmarks are the interleaved ones).",
+        f"minutes on 2 cores). {views}. Each method at its own val-chosen setting (best mean val PSNR over seeds "
+        f"{', '.join(map(str, seeds))} among the settings run on all of them, else best val PSNR of seed {seeds[0]}); "
+        "test PSNR of that setting only, mean ± std over the seeds run. PSNRs agree across devices up to float "
+        "rounding and random streams. Training seconds are the device's and were taken while other work shared the "
+        "machine: they are no speed measurement (the speed benchmarks are the interleaved ones).",
         machine=recording_machines(results.values()),
     )
-    images = {"lego": lambda p: f"{400 // p.lego_downscale}×{400 // p.lego_downscale}", "fern": lambda p: "504×378"}
-    protocols = [
-        f"| {p.name} | {p.iters} | {p.rays} | {p.grid[0]}³ → {p.grid[1]}³ | "
-        + " | ".join(images[s](p) if s in p.scenes else "—" for s in ("lego", "fern"))
-        + " |"
-        for p in suite.protocols.values()
-    ]
+    protocols = []
+    for p in suite.protocols.values():
+        images = {"lego": f"{400 // p.lego_downscale}×{400 // p.lego_downscale}", "fern": "504×378"}
+        sizes = [image if scene in p.scenes else "—" for scene, image in images.items()]
+        protocols.append(harness.md_row([p.name, p.iters, p.rays, f"{p.grid[0]}³ → {p.grid[1]}³", *sizes]))
     body += [*harness.table(["protocol", "iterations", "rays", "grid", "lego image", "fern image"], protocols), ""]
     chosen: list[str] = []
     sweeps: list[str] = []
@@ -245,8 +229,7 @@ def quality_section(results: dict[str, dict], repeats: Sequence[dict], suite: ha
     head = ["scene", "protocol", "device", *picks, "gap", "CPU threads", "train s (f / t)"]
     body += [*harness.table(head, chosen), ""]
     body += targets_table(results, suite)
-    body += mid_along_the_budget(results, suite)
-    body += rule_along_the_budget(results, suite)
+    body += along_the_budget(results, suite)
     body += ["", *curve_table(results, suite)]
     body += later_seeds_table(results, repeats, suite)
     body += cpu_reruns_table(results, repeats)
@@ -401,16 +384,11 @@ def equal_time_section(rows: Sequence[dict], suite: harness.Suite) -> list[str]:
     for scene in suite.equal_time["scenes"]:
         if any(r["scene"] == scene for r in rows):
             body += scene_tables(rows, scene, suite)
-    off = [r["trained_seconds"] / r["planned_seconds"] - 1 for r in rows if r.get("planned_seconds")]
-    if off:
+    if off := [r["trained_seconds"] / r["planned_seconds"] - 1 for r in rows if r.get("planned_seconds")]:
         spread = f"{min(off):+.0%}" + (f" to {max(off):+.0%}" if len(off) > 1 else "")
         body += [f"Actual against planned training time: {spread} over the {len(off)} trained points.", ""]
-    cut = [
-        r["iterations"] / r["planned_iterations"]
-        for r in rows
-        if r.get("planned_iterations", 0) > r.get("iterations", 0)
-    ]
-    if cut:
+    stopped = [r for r in rows if r.get("planned_iterations", 0) > r.get("iterations", 0)]
+    if cut := [r["iterations"] / r["planned_iterations"] for r in stopped]:
         body += [
             f"Points stopped at their budget before the end of their schedules: {len(cut)}, after {min(cut):.0%} to "
             f"{max(cut):.0%} of their planned iterations (their iterations cost more than the run timed them at).",

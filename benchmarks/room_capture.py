@@ -87,10 +87,8 @@ def picture(rows: dict[str, dict], room: Path, work: Path, threads: int | None, 
         print(f"kept {path}: the recorded runs it shows are not on this machine ({', '.join(missing)})")
         return
     if missing:
-        sys.exit(
-            f"error: the recorded runs {', '.join(missing)} are not on this machine, so their views cannot be "
-            f"pictured; move {RESULTS} aside to train the runs again"
-        )
+        sys.exit(f"error: the recorded runs {', '.join(missing)} are not on this machine, so their views cannot be "
+                 f"pictured; move {RESULTS} aside to train the runs again")  # fmt: skip
     folders = {}
     for method, row in rows.items():
         folders[method] = work / f"{row['key']}_renders"
@@ -152,8 +150,7 @@ def main() -> None:
     run = partial(execute, room=room, work=args.work, lpips=lpips, threads=args.threads)
     harness.run_all([harness.Job(r.key, args.work / r.key, partial(run, r)) for r in plan], RESULTS)
     results = harness.load_results(RESULTS)
-    failed = [r.key for r in plan if r.key not in results]
-    if failed:
+    if failed := [r.key for r in plan if r.key not in results]:
         sys.exit(f"error: {len(failed)} runs failed (their logs are under {args.work}); run again")
     eight = {m: results[harness.Run(m, 0, args.seed, "8").key] for m in METHODS}
     picture(eight, room, args.work, args.threads, harness.REPO / PICTURE)

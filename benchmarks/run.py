@@ -38,8 +38,7 @@ def execute(point: Point, args: argparse.Namespace, suite: harness.Suite = SUITE
     every = suite.curve_every
     if args.stage == "curve":  # keep a checkpoint every ``curve_every`` iterations (the later flag wins)
         extra += ["--steps-per-save", str(every), "--keep-checkpoints", str(run.iters // every + 1)]
-    data = args.data / suite.scenes[scene]["path"]
-    lpips, work = args.lpips, args.work / scene
+    data, lpips, work = args.data / suite.scenes[scene]["path"], args.lpips, args.work / scene
     row = harness.train_and_eval(run, data, suite.parser_args(scene, protocol), work, lpips, extra, args.threads)
     run_dir = Path(row["run_dir"])
     row |= harness.evaluate(run_dir, run.key, work, lpips, split="val", threads=args.threads)
@@ -116,12 +115,6 @@ def iteration_plan(
     stage = suite.equal_time["iterations"]
     points = [TimedPoint(s, m, budget or stage["budget"]) for m in only or stage["methods"] for s in scenes]
     return [p for p in points if p.scene in p.variant(suite).get("scenes", scenes)]
-
-
-def point_command(point: TimedPoint, suite: harness.Suite, data: Path, work: Path) -> list[str]:
-    """The training command ``execute_timed`` runs for a point."""
-    run, scene_data, parser, scene_work, flags = point.train_args(suite, data, work)
-    return harness.train_command(run, scene_data, scene_work / "runs", parser, flags, threads=THREADS)
 
 
 def too_short(log: Path) -> str | None:
@@ -203,10 +196,6 @@ def merge(path: Path, sources: Sequence[Path], again: str | None) -> list[str]:
     return lines
 
 
-def point(scene: str, protocol: str, method: str, setting: str, seed: int, suite: harness.Suite = SUITE) -> Point:
-    return scene, protocol, setting, harness.Run(method, suite.protocols[protocol].iters, seed, f"{protocol}_{setting}")
-
-
 def plan(args: argparse.Namespace, suite: harness.Suite = SUITE) -> list[Point]:
     """The stage's points: a sweep's every setting at the first seed; seeds and curve, --only's or the val choice."""
     sweep, results = args.stage == "sweep", {} if args.stage == "sweep" else harness.load_results(args.results)
@@ -216,6 +205,7 @@ def plan(args: argparse.Namespace, suite: harness.Suite = SUITE) -> list[Point]:
         if (chosen_of := suite.protocols[p].curve_of if args.stage == "curve" else p) is None:
             curves = [name for name, protocol in suite.protocols.items() if protocol.curve_of]
             sys.exit(f"error: the curve stage runs {' or '.join(curves)}, not {p}")
+        iters = suite.protocols[p].iters
         for scene in [s for s in args.scene if not sweep or s in suite.protocols[p].scenes]:
             for method in args.methods or suite.methods:
                 if sweep:
@@ -228,9 +218,8 @@ def plan(args: argparse.Namespace, suite: harness.Suite = SUITE) -> list[Point]:
                         sys.exit(f"error: no sweep result for {scene} {chosen_of} {method}; run the sweep stage "
                                  "first or pass --only")  # fmt: skip
                     settings = [best]
-                points += [
-                    point(scene, p, method, s, seed) for s in settings if harness.applies(method, s) for seed in seeds
-                ]
+                runs = [(s, seed) for s in settings if harness.applies(method, s) for seed in seeds]
+                points += [(scene, p, s, harness.Run(method, iters, seed, f"{p}_{s}")) for s, seed in runs]
     return points
 
 
@@ -240,20 +229,17 @@ def parse_args(argv: Sequence[str] | None = None, suite: harness.Suite = SUITE) 
     ap.add_argument("--protocol", nargs="+", choices=tuple(suite.protocols), help="default: cpu-800 mid-3000 mid-800; "
                     "curve: cpu-3000")  # fmt: skip
     ap.add_argument("--scene", nargs="+", choices=tuple(suite.settings), default=list(suite.settings))
-    ap.add_argument(
-        "--data", type=Path, default=harness.REPO.parent / "shared" / "data", help="holds blender/lego, llff/fern"
-    )
-    ap.add_argument("--lpips", type=Path, default=harness.REPO.parent / "shared" / harness.LPIPS)
+    shared = harness.REPO.parent / "shared"
+    ap.add_argument("--data", type=Path, default=shared / "data", help="holds blender/lego, llff/fern")
+    ap.add_argument("--lpips", type=Path, default=shared / harness.LPIPS)
     ap.add_argument("--work", type=Path, help="run folders and logs (default: outputs/bench_STAGE)")
     ap.add_argument("--results", type=Path, help="one row a finished run (default: the stage's, benchmarks/results/)")
     ap.add_argument("--budget", nargs="+", help="equal-time: each point's --time-budget; equal-iterations: one count "
                     "such as 200it (default: the suite's)")  # fmt: skip
     ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
     ap.add_argument("--only", nargs="+", help="sweep only these settings (names from suite.toml)")
-    stage_methods = {
-        "equal-time": suite.equal_time["methods"],
-        "equal-iterations": suite.equal_time["iterations"]["methods"],
-    }
+    equal_time = suite.equal_time
+    stage_methods = {"equal-time": equal_time["methods"], "equal-iterations": equal_time["iterations"]["methods"]}
     every_method = dict.fromkeys([*suite.methods, *(m for ms in stage_methods.values() for m in ms)])
     ap.add_argument("--methods", nargs="+", choices=tuple(every_method), help="run only these methods")
     ap.add_argument("--seeds", nargs="+", type=int, choices=suite.seeds[1:], help="the seeds stage's later seeds")
@@ -271,8 +257,7 @@ def parse_args(argv: Sequence[str] | None = None, suite: harness.Suite = SUITE) 
         sys.exit(f"error: --budget sets the equal-time stage's budgets; drop it for the {stage} stage")
     if counted and args.budget and (len(args.budget) != 1 or not budget_iterations(args.budget[0])):
         sys.exit(f"error: --budget {' '.join(args.budget)}: the equal-iterations stage takes one count, e.g. 200it")
-    default = [suite.equal_time["iterations"]["budget"]] if counted else list(suite.equal_time["budgets"])
-    args.budget = args.budget or default
+    args.budget = args.budget or ([equal_time["iterations"]["budget"]] if counted else list(equal_time["budgets"]))
     allowed = stage_methods.get(stage, suite.methods)
     if set(args.methods or ()) - set(allowed):
         sys.exit(f"error: --methods: the {stage} stage runs {', '.join(allowed)}; pass some of those")

@@ -100,7 +100,6 @@ def browser_cpu_seconds() -> float:
     return total
 
 
-# -- (a) latency ------------------------------------------------------------------------------------------------------
 def orbit_moves(handle: ViewerHandle, n: int) -> list[tuple[np.ndarray, np.ndarray]]:
     """Camera positions turning about the scene's up axis through the object, 360/n degrees apart, and the target."""
     cameras = handle.run.pipeline.datamanager.reference_outputs.cameras
@@ -147,14 +146,12 @@ def latency_on(config: Path, moves: int) -> dict:
             render_only = [render_view(model, camera, model.cutoffs(handle.run.step)).seconds for _ in range(5)]
     latencies = [s for _, s in answered]
     return {
-        "latencies": latencies,
-        "median": statistics.median(latencies),
+        "latencies": latencies, "median": statistics.median(latencies),
         "sizes": sorted({f"{r.width}×{r.height}" for r, _ in answered}),
         "rendered_sides": [r.render_width for r, _ in answered],
         "preview_seconds": [r.render_seconds for r, _ in answered],
-        "render_only_median": statistics.median(render_only),
-        "missed": moves - len(answered),
-    }
+        "render_only_median": statistics.median(render_only), "missed": moves - len(answered),
+    }  # fmt: skip
 
 
 def final_on(config: Path, moves: int) -> dict:
@@ -166,7 +163,6 @@ def final_on(config: Path, moves: int) -> dict:
             "sizes": sorted({f"{r.width}×{r.height}" for r, _ in answered})}  # fmt: skip
 
 
-# -- (b) slowdown -----------------------------------------------------------------------------------------------------
 def train_with_browser(cmd: list[str], port: int, log: Path) -> float:
     """A ``--viewer`` training with a headless browser (opened first, as a user's) on its page; the browser's CPU s."""
     with headless_page(None) as page:
@@ -232,18 +228,15 @@ def measure_slowdown(data: Path, work: Path, rounds: int, iters: int) -> dict:
         return statistics.median(column(arm, key)) / statistics.median(column(base, key)) - 1.0
 
     return {
-        "seconds": {arm: column(arm, "seconds") for arm in ARMS},
-        "slowdown": ratio("viewer", "plain"),
-        "browser_slowdown": ratio("browser", "plain"),
-        "viewer_over_browser": ratio("viewer", "browser"),
+        "seconds": {arm: column(arm, "seconds") for arm in ARMS}, "slowdown": ratio("viewer", "plain"),
+        "browser_slowdown": ratio("browser", "plain"), "viewer_over_browser": ratio("viewer", "browser"),
         "own_share": statistics.median(column("viewer", "own_share")),
         "browser_cpu": {arm: column(arm, "browser_cpu") for arm in ARMS if ARMS[arm] is not None},
         "steady_slowdown": ratio("viewer", "plain", "steady"),
         "steady_browser_slowdown": ratio("browser", "plain", "steady"),
-    }
+    }  # fmt: skip
 
 
-# -- screenshots -------------------------------------------------------------------------------------------------------
 SCREENSHOT_CUTOFFS = {"viewer_lego_f1.png": 1.0, "viewer_lego_f005.png": 0.05}
 
 
@@ -271,7 +264,6 @@ def screenshots(config: Path, docs: Path) -> list[Path]:
     return written
 
 
-# -- report ------------------------------------------------------------------------------------------------------------
 def section(latency: dict, final: dict, ab: dict, command: str, iters: int, rounds: int) -> list[str]:
     lats, sides, seconds = latency["latencies"], latency["rendered_sides"], ab["seconds"]
     side_range = f"{min(sides)}" if min(sides) == max(sides) else f"{min(sides)}–{max(sides)}"
@@ -284,16 +276,15 @@ def section(latency: dict, final: dict, ab: dict, command: str, iters: int, roun
         return ", ".join(f"{v:.{digits}f}" for v in values)
 
     settings = (
-        f"P-CPU lego (fourierf-vm, views {' '.join('r_' + v for v in harness.LEGO_VIEWS)}, 100×100, 64³ → 128³, {iters}"
-        " iterations)."
-        " Latency: one headless chromium (704×704 window), the camera turned from the server; time from the command"
-        " to the first preview handed to the page's connection. Slowdown: training seconds (metrics.jsonl) of three"
-        f" arms, {rounds} interleaved rounds (order rotating), same flags: no viewer; `--viewer True"
-        " --viewer-max-slowdown 0.001` with one headless browser on the page (the viewer draws its first picture and"
-        " then almost nothing: the browser's own cost on these cores); `--viewer True` at its default budget"
-        f" ({BUDGET}) with the browser. The browser starts before the training and opens the page when the server"
-        " answers; it draws WebGL in software (SwiftShader) on the training's two cores. The viewer makes its"
-        " snapshots and pictures on the training thread between steps (`fourierf_plugin/viewer/live.py`)."
+        f"P-CPU lego (fourierf-vm, views {' '.join('r_' + v for v in harness.LEGO_VIEWS)}, 100×100, 64³ → 128³, "
+        f"{iters} iterations). Latency: one headless chromium (704×704 window), the camera turned from the server; "
+        "time from the command to the first preview handed to the page's connection. Slowdown: training seconds "
+        f"(metrics.jsonl) of three arms, {rounds} interleaved rounds (order rotating), same flags: no viewer; "
+        "`--viewer True --viewer-max-slowdown 0.001` with one headless browser on the page (the viewer draws its first "
+        "picture and then almost nothing: the browser's own cost on these cores); `--viewer True` at its default "
+        f"budget ({BUDGET}) with the browser. The browser starts before the training and opens the page when the "
+        "server answers; it draws WebGL in software (SwiftShader) on the training's two cores. The viewer makes its "
+        "snapshots and pictures on the training thread between steps (`fourierf_plugin/viewer/live.py`)."
     )
     missed = f" Moves without a preview within 60 s: {latency['missed']}." if latency["missed"] else ""
     return [

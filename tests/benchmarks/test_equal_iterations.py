@@ -11,7 +11,7 @@ import harness
 import pytest
 import report as rep
 
-from tests.benchmarks.test_equal_time import fake_runs  # noqa: F401 (a fixture)
+from tests.benchmarks.test_equal_time import fake_runs, point_command  # noqa: F401 (a fixture)
 from tests.helpers import load_benchmark
 
 runner = load_benchmark("run")
@@ -42,7 +42,7 @@ ROWS = [
 
 
 def test_an_iteration_budget_is_max_iterations_with_no_size_flag(tmp_path: Path) -> None:
-    cmd = runner.point_command(runner.TimedPoint("fern", "tensorf-vm", BUDGET), SUITE, tmp_path, tmp_path / "w")
+    cmd = point_command(runner.TimedPoint("fern", "tensorf-vm", BUDGET), tmp_path, tmp_path / "w")
     assert cmd[1] == "tensorf-vm" and cmd[cmd.index("--max-num-iterations") + 1] == BUDGET.removesuffix("it")
     assert not any(flag in c for c in cmd for flag in SIZE_FLAGS) and cmd[cmd.index("--threads") + 1] == "1"
     assert "--pipeline.model.alpha-weight" not in cmd
@@ -52,12 +52,12 @@ def test_an_iteration_budget_is_max_iterations_with_no_size_flag(tmp_path: Path)
 
 def test_a_variant_trains_its_method_with_its_flags_under_its_own_key(tmp_path: Path) -> None:
     variant, plain = (runner.TimedPoint("lego", m, BUDGET) for m in ("zerorf-vm-no-alpha", "zerorf-vm"))
-    cmd = runner.point_command(variant, SUITE, tmp_path, tmp_path / "w")
+    cmd = point_command(variant, tmp_path, tmp_path / "w")
     assert cmd[1] == "zerorf-vm" and cmd[cmd.index("--pipeline.model.alpha-weight") + 1] == "0"
     assert cmd.index("--pipeline.model.alpha-weight") < cmd.index("blender-data")  # a trainer flag, not a parser's
     assert not any(flag in c for c in cmd for flag in SIZE_FLAGS)
     assert variant.run(SUITE).key != plain.run(SUITE).key and variant.run(SUITE).key.startswith("zerorf-vm-no-alpha_")
-    assert "--pipeline.model.alpha-weight" not in runner.point_command(plain, SUITE, tmp_path, tmp_path / "w")
+    assert "--pipeline.model.alpha-weight" not in point_command(plain, tmp_path, tmp_path / "w")
 
 
 def test_the_plan_runs_the_slowest_methods_first_and_a_variant_on_its_scenes_only() -> None:

@@ -31,6 +31,12 @@ def _row(scene: str, method: str, budget: str, seconds: float, psnr: float, spi:
     }  # fmt: skip
 
 
+def point_command(point: runner.TimedPoint, data: Path, work: Path) -> list[str]:
+    """The training command ``execute_timed`` runs for a point (``train_and_eval``'s, on one thread)."""
+    run, scene_data, parser, scene_work, flags = point.train_args(SUITE, data, work)
+    return harness.train_command(run, scene_data, scene_work / "runs", parser, flags, threads=runner.THREADS)
+
+
 def _too_short(scene: str, method: str, budget: str) -> dict:
     row = _row(scene, method, budget, 1.0, 0.0)
     return {k: row[k] for k in ("key", "scene", "method", "budget", "budget_seconds", "threads", "jobs", "machine")} | {
@@ -53,7 +59,7 @@ ROWS = [
 
 
 def test_a_points_command_is_a_users_run_at_its_budget_on_one_thread(tmp_path: Path) -> None:
-    cmd = runner.point_command(runner.TimedPoint("lego", "zerorf-vm", "3m"), SUITE, tmp_path, tmp_path / "w")
+    cmd = point_command(runner.TimedPoint("lego", "zerorf-vm", "3m"), tmp_path, tmp_path / "w")
     assert cmd[0].endswith("fourierf-train") and cmd[1] == "zerorf-vm"
     assert cmd[cmd.index("--time-budget") + 1] == "3m" and cmd[cmd.index("--threads") + 1] == "1"
     assert "--max-num-iterations" not in cmd and not any("n-voxels" in c or "rays-per-batch" in c for c in cmd)
@@ -61,7 +67,7 @@ def test_a_points_command_is_a_users_run_at_its_budget_on_one_thread(tmp_path: P
     parser = cmd[cmd.index("blender-data") :]
     assert parser[1:3] == ["--downscale", "4"]  # the cpu protocol's 100×100
     assert parser[parser.index("--view-ids") + 1 :] == ["27", "76", "97", "99"]
-    fern = runner.point_command(runner.TimedPoint("fern", "freenerf", "1m"), SUITE, tmp_path, tmp_path / "w")
+    fern = point_command(runner.TimedPoint("fern", "freenerf", "1m"), tmp_path, tmp_path / "w")
     assert fern[fern.index("llff-data") :] == ["llff-data", "--num-views", "3"]
 
 

@@ -201,14 +201,14 @@ def test_the_rule_line_sets_each_methods_800_iteration_run_beside_its_3000() -> 
             _row(long, SEEDS[1], val=25.0, test=25.0) | base | {"protocol": p_long, "key": f"{method}/long1"},
             _row(long, SEEDS[0], val=21.0, test=20.5) | base | {"protocol": p_long, "key": f"{method}/long"},
         ]
-    lines = rep.rule_along_the_budget({r["key"]: r for r in rows})
+    lines = rep.along_the_budget({r["key"]: r for r in rows})
     assert lines == [
         f"- fern, {method}, the budget rule's settings at cpu sizes: `{rule['at_800']}` at 800 iterations val "
         f"19.50, test 19.00 → `{rule['at_3000']}` at 3000 val 21.00, test 20.50"
         for method, rule in RULE.items()
     ]
-    assert rep.rule_along_the_budget({r["key"]: r for r in rows[:1]}) == [], "no 3000-iteration run: no line"
-    assert rep.rule_along_the_budget({r["key"]: r for r in rows[:2]}) == [], "a later seed's alone: no line"
+    assert rep.along_the_budget({r["key"]: r for r in rows[:1]}) == [], "no 3000-iteration run: no line"
+    assert rep.along_the_budget({r["key"]: r for r in rows[:2]}) == [], "a later seed's alone: no line"
 
 
 def test_the_targets_table_reads_each_target_against_the_baseline_it_names() -> None:
@@ -246,10 +246,10 @@ def test_the_p_mid_line_sets_the_first_seeds_800_iteration_run_beside_its_3000()
         fern | {"protocol": "mid-3000", "seed": SEEDS[2], "val_psnr": 30.0, "psnr": 30.0, "key": "later"},
         fern | {"protocol": "mid-3000", "seed": SEEDS[0], "val_psnr": 19.0, "psnr": 18.0, "key": "long"},
     ]
-    assert rep.mid_along_the_budget({r["key"]: r for r in rows}) == [
+    assert rep.along_the_budget({r["key"]: r for r in rows}) == [
         "- fern, tensorf-vm, mid sizes, `lr0.08`, 800 → 3000 iterations: val 16.50 → 19.00, test 15.50 → 18.00"
     ]
-    assert rep.mid_along_the_budget({r["key"]: r for r in rows[:2]}) == [], "no first-seed 3000 run: no line"
+    assert rep.along_the_budget({r["key"]: r for r in rows[:2]}) == [], "no first-seed 3000 run: no line"
 
 
 def test_seeds_run_the_val_choice_on_the_later_seeds(tmp_path: Path) -> None:

@@ -247,9 +247,9 @@ def check_mlp_options(config: Any) -> None:
 MLP_SAMPLING_OPTIONS = ("n_voxels_init", "n_voxels_final", "upsample_fractions")
 """The ``field`` options an MLP field reads: the size and schedule of the grid the sampler and occupancy grid use."""
 MLP_IGNORED = ("optimizer.lr_grids", "optimizer.lr_generator", "optimizer.generator_grad_clip")
+"""Optimiser options of parameter groups an MLP field does not have (its one group is ``networks``)."""
 LEVELS_IGNORED = (f"{_MODEL}.step_ratio", f"{_MODEL}.occupancy_update_fractions")
 """Sampling options that FreeNeRF's two levels (``samples_per_level``) do not read, beside the grid's ``field`` ones."""
-"""Optimiser options of parameter groups an MLP field does not have (its one group is ``networks``)."""
 
 
 def check_mlp_flags(config: Any, given: frozenset[str]) -> None:

@@ -283,18 +283,24 @@ class FourieRFModel(nn.Module):
             if colour:
                 rgb = self.colours(samples, weights, scale)
         with phase("compositing"):
-            acc = weights.sum(dim=-1)
-            rgb = blend_background(rgb, acc, background)
-            if not self.training:
-                rgb = rgb.clamp(0.0, 1.0)
-            depth = expected_depth(weights, samples.t, torch.full_like(acc, self.far))
-        out = {"rgb": rgb, "accumulation": acc, "depth": depth, "background": background}
+            out = self.composite(rgb, weights, samples.t, background)
         if self.training:
             rays = TrainingRays(
-                sigma, samples.t, samples.deltas, weights, acc, self.near, self.far, self.config.distance_scale
-            )
+                sigma, samples.t, samples.deltas, weights, out["accumulation"], self.near, self.far,
+                self.config.distance_scale,
+            )  # fmt: skip
             out |= self.ray_terms(rays, terms)
         return out
+
+    def composite(self, rgb: Tensor, weights: Tensor, t: Tensor, background: Tensor) -> dict[str, Tensor]:
+        """A render's outputs from its weighted colour [R, 3] and weights [R, N] at ``t``: the colour on
+        ``background`` (clamped in renders), the opacity, the expected depth (misses at far) and the background."""
+        acc = weights.sum(dim=-1)
+        rgb = blend_background(rgb, acc, background)
+        if not self.training:
+            rgb = rgb.clamp(0.0, 1.0)
+        depth = expected_depth(weights, t, torch.full_like(acc, self.far))
+        return {"rgb": rgb, "accumulation": acc, "depth": depth, "background": background}
 
     def ray_terms(self, rays: TrainingRays, terms: Collection[str] | None) -> dict[str, Tensor]:
         """Each regulariser's term on a training render's rays, by name (only those named in ``terms`` when given)."""

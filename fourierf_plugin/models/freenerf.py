@@ -29,12 +29,7 @@ from fourierf_plugin.model_components import losses
 from fourierf_plugin.model_components.marching import occupied, shade
 from fourierf_plugin.model_components.ray_sampling import RaySamples
 from fourierf_plugin.model_components.regularisers import TrainingRays
-from fourierf_plugin.model_components.rendering import (
-    blend_background,
-    composite_target,
-    composite_weights,
-    expected_depth,
-)
+from fourierf_plugin.model_components.rendering import composite_target, composite_weights
 from fourierf_plugin.model_components.resampling import (
     blurred_weights,
     midpoints_and_lengths,
@@ -131,11 +126,11 @@ class FreeNeRFModel(FourieRFModel):
             background = self.draw_background(origins.shape[0], origins.device)
         generator = (jitter or self.step_generator) if self.training else None
         coarse, fine = self._levels(origins, directions, generator, colour)
-        out = {**self._composite(fine, background), "background": background}
+        out = self._composite(fine, background)
         if self.training:
             out["rgb_coarse"] = self._composite(coarse, background)["rgb"]
             rays = TrainingRays(
-                fine.sigma, fine.t, fine.deltas, fine.weights, fine.weights.sum(dim=-1), self.near, self.far,
+                fine.sigma, fine.t, fine.deltas, fine.weights, out["accumulation"], self.near, self.far,
                 self.config.distance_scale,
             )  # fmt: skip
             out |= self.ray_terms(rays, terms)
@@ -168,16 +163,12 @@ class FreeNeRFModel(FourieRFModel):
         return levels
 
     def _composite(self, level: Level, background: Tensor) -> dict[str, Tensor]:
-        """A level's ray colour on ``background`` (clamped in renders), opacity and expected depth."""
-        acc = level.weights.sum(dim=-1)
-        rgb = acc.new_zeros(acc.shape[0], 3)
+        """A level's render (``composite``) from its samples' colours (none: a geometry-only render)."""
+        weights = level.weights
+        rgb = weights.new_zeros(weights.shape[0], 3)
         if level.rgb is not None:
-            rgb = (level.weights.unsqueeze(-1) * level.rgb).sum(dim=1)
-        rgb = blend_background(rgb, acc, background)
-        if not self.training:
-            rgb = rgb.clamp(0.0, 1.0)
-        depth = expected_depth(level.weights, level.t, torch.full_like(acc, self.far))
-        return {"rgb": rgb, "accumulation": acc, "depth": depth}
+            rgb = (weights.unsqueeze(-1) * level.rgb).sum(dim=1)
+        return self.composite(rgb, weights, level.t, background)
 
     def loss_dict(self, outputs: dict, target_rgba: Tensor, step: int) -> dict[str, Tensor]:
         """Any model's terms on the render, and with two levels the first level's MSE at ``coarse_loss_weight``."""

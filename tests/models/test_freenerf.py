@@ -205,6 +205,7 @@ def test_the_cost_estimate_counts_the_network_per_sample() -> None:
         (["--optimizer.lr-grids", "0.1"], "--optimizer.lr-grids"),
         (["--pipeline.model.samples-per-level", "-1"], "--pipeline.model.samples-per-level"),
         (["--pipeline.model.resample-padding", "-0.01"], "--pipeline.model.resample-padding"),
+        (["--pipeline.model.coarse-loss-weight", "-1"], "--pipeline.model.coarse-loss-weight"),
         (
             ["--pipeline.model.samples-per-level", "8", "--pipeline.model.step-ratio", "0.5"],
             "--pipeline.model.step-ratio",

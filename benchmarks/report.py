@@ -479,16 +479,38 @@ def iterations_table(rows: Sequence[dict], scene: str, methods: Sequence[str]) -
     return [*lines, ""]
 
 
+def time_ratios(rows: Sequence[dict], scene: str, suite: harness.Suite) -> str:
+    """Each method's training time over the baseline's on a scene, from the rows of the baseline's invocation at its
+    iterations only (one machine, one load), the paper's Table 3 ratio in brackets where it has one."""
+    stage, paper = suite.equal_time["iterations"], suite.equal_time["paper_time_ratio"]
+    base = next(iter(counted(rows, scene, BASELINE)), None)
+    if base is None or not base.get("invocation"):
+        return f"{scene} not timed in one invocation"
+    ratios = [
+        f"{r['method']} {r['trained_seconds'] / base['trained_seconds']:.2f}"
+        + (f" ({paper[r['method']]})" if r["method"] in paper else "")
+        for method in stage["methods"]
+        if method != BASELINE
+        for r in counted(rows, scene, method)
+        if (r.get("invocation"), r["budget"]) == (base["invocation"], base["budget"])
+    ]
+    return f"{scene} at {base['iterations']} iterations: " + (", ".join(ratios) or "no other method in its invocation")
+
+
 def derived_lines(rows: Sequence[dict], suite: harness.Suite) -> list[str]:
-    """FourieRF (paper) over TensoRF (published) on each scene beside the paper's gap; ZeroRF's alpha term on lego."""
-    paper_gap = suite.equal_time["iterations"]["paper_gap"]
+    """FourieRF (paper) over TensoRF (published) on each scene beside the paper's gap; ZeroRF's alpha term on lego;
+    each method's training time over TensoRF (published)'s beside the paper's Table 3."""
+    scenes, paper_gap = suite.equal_time["scenes"], suite.equal_time["iterations"]["paper_gap"]
     gaps = [
         f"{scene} {gap(rows, scene, PAPER, BASELINE)} (paper at full scale: {paper_gap[scene]:+.1f} dB)"
-        for scene in suite.equal_time["scenes"]
+        for scene in scenes
     ]
     return [
         f"- {PAPER} minus {BASELINE}, test PSNR: " + "; ".join(gaps) + ".",
         f"- {ALPHA} with minus without its alpha term ({NO_ALPHA}) on lego: {gap(rows, 'lego', ALPHA, NO_ALPHA)}.",
+        f"- Training time over {BASELINE}'s, rows of one invocation (the paper's Table 3 in brackets): "
+        + "; ".join(time_ratios(rows, scene, suite) for scene in scenes)
+        + ".",
         "",
     ]
 
@@ -504,8 +526,8 @@ def equal_iterations_section(rows: Sequence[dict], suite: harness.Suite) -> list
         f"applying as they would), then `fourierf-eval` on the test views; lego at {side}×{side}. {NO_ALPHA} is "
         "zerorf-vm with `--pipeline.model.alpha-weight 0`, on lego only (fern's images carry no alpha). A method "
         "too slow for that budget here runs a shorter one (`--budget Nit`), the iterations column saying which; "
-        "each derived line compares rows of equal iterations only. Training seconds come from a shared, loaded "
-        "machine (other work ran beside these points); the equal-time section has the quiet-machine speeds.",
+        "each derived line compares rows of equal iterations only. Training seconds compare only within one "
+        "invocation of run.py (one machine, one load): the time line takes its rows from the baseline's.",
     )
     if not rows:
         return [*body, "No points are recorded yet.", ""]

@@ -18,6 +18,7 @@ import json
 import re
 import sys
 import time
+import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -123,14 +124,17 @@ def too_short(log: Path) -> str | None:
     return found.group(0) if found else None
 
 
-def execute_timed(point: TimedPoint, suite: harness.Suite, data: Path, work: Path, lpips: Path, jobs: int) -> dict:
-    """Train and evaluate one point; its row (planned and actual training seconds from the run's metrics)."""
+def execute_timed(
+    point: TimedPoint, suite: harness.Suite, data: Path, work: Path, lpips: Path, jobs: int, invocation: str = ""
+) -> dict:
+    """Train and evaluate one point; its row (planned and actual training seconds from the run's metrics).
+    ``invocation`` names the run.py call the point ran in: only its rows shared one machine and one load."""
     started, (run, scene_data, parser, scene_work, flags) = time.perf_counter(), point.train_args(suite, data, work)
     iterations = budget_iterations(point.budget)
     size = {"budget_iterations": iterations} if iterations else {"budget_seconds": parse_duration(point.budget)}
     row = {
         "scene": point.scene, "method": point.method, "budget": point.budget, **size, "flags": flags,
-        "threads": THREADS, "jobs": jobs, "machine": harness.cpu_and_cores(),
+        "threads": THREADS, "jobs": jobs, "machine": harness.cpu_and_cores(), "invocation": invocation,
     }  # fmt: skip
     try:
         trained = harness.train_and_eval(run, scene_data, parser, scene_work, lpips, flags, threads=THREADS)
@@ -151,7 +155,7 @@ def execute_timed(point: TimedPoint, suite: harness.Suite, data: Path, work: Pat
 
 
 def timed_job(point: TimedPoint, args: argparse.Namespace) -> harness.Job:
-    execute = lambda: execute_timed(point, SUITE, args.data, args.work, args.lpips, args.jobs)  # noqa: E731
+    execute = lambda: execute_timed(point, SUITE, args.data, args.work, args.lpips, args.jobs, args.invocation)  # noqa: E731
     return harness.Job(point.key, args.work / point.scene / point.run(SUITE).key, execute)
 
 
@@ -300,6 +304,7 @@ def main() -> None:
                 points = iteration_plan(SUITE, args.scene, args.methods, args.budget[0])
         except UserError as err:  # a --budget that is no duration
             sys.exit(f"error: --budget: {err}")
+        args.invocation = uuid.uuid4().hex[:12]
         return harness.run_all([timed_job(p, args) for p in points], args.results, args.jobs, args.again)
     points = sorted(plan(args), key=lambda p: (-p[3].iters, p[0] != "fern"))  # longest first: the pool ends on short
     harness.run_all([quality_job(p, args) for p in points], args.results, args.jobs, args.again)

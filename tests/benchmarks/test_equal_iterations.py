@@ -72,7 +72,7 @@ def test_the_plan_runs_the_slowest_methods_first_and_a_variant_on_its_scenes_onl
 def test_a_point_records_its_iterations_flags_and_metrics(fake_runs: dict, tmp_path: Path) -> None:  # noqa: F811
     point = runner.TimedPoint("lego", "zerorf-vm-no-alpha", BUDGET)
     row = runner.execute_timed(point, SUITE, tmp_path, tmp_path, tmp_path, 2)
-    assert row["budget_iterations"] == 800 and "budget_seconds" not in row
+    assert row["budget_iterations"] == 800 and "budget_seconds" not in row and row["invocation"] == ""
     assert row["flags"] == ["--pipeline.model.alpha-weight", "0"] and row["method"] == "zerorf-vm-no-alpha"
     assert row["iterations"] == 500 and row["seconds_per_iteration"] == pytest.approx(0.11)
     assert (row["psnr"], row["ssim"], row["lpips"]) == (21.0, 0.8, 0.2)
@@ -92,6 +92,24 @@ def test_the_derived_lines_give_each_gap_beside_the_papers() -> None:
     assert missing[1].endswith("on lego: not run at equal iterations.")
 
 
+def test_time_ratios_take_rows_of_the_baselines_invocation_only() -> None:
+    def timed(method: str, seconds: float, invocation: str, iterations: int = 800) -> dict:
+        return _row("lego", method, 20.0, iterations) | {"trained_seconds": seconds, "invocation": invocation}
+
+    rows = [
+        timed("tensorf-vm-published", 100.0, "a"),
+        timed("zerorf-vm", 650.0, "a"),
+        timed("fourierf-vm", 40.0, "a"),
+        timed("freenerf", 900.0, "b"),  # another invocation: another machine or load
+        timed("fourierf-vm-paper", 90.0, "a", 150),  # another budget
+    ]
+    assert rep.time_ratios(rows, "lego", SUITE) == "lego at 800 iterations: zerorf-vm 6.50 (5.18), fourierf-vm 0.40"
+    assert rep.time_ratios(rows[1:], "lego", SUITE) == "lego not timed in one invocation"
+    assert rep.time_ratios(ROWS, "lego", SUITE) == "lego not timed in one invocation"  # rows with no invocation
+    line = rep.derived_lines(rows, SUITE)[2]
+    assert line.startswith("- Training time over tensorf-vm-published's") and "fern not timed" in line
+
+
 def test_a_gap_compares_rows_of_equal_iterations_only() -> None:
     longer = [*ROWS, _row("lego", "zerorf-vm", 23.0, 800)]  # no 800-iteration row without alpha: 150 it is
     assert rep.gap(longer, "lego", "zerorf-vm", "zerorf-vm-no-alpha") == "+1.25 dB at 150 iterations"
@@ -106,7 +124,7 @@ def test_a_gap_compares_rows_of_equal_iterations_only() -> None:
 def test_the_section_has_a_table_per_scene_and_says_what_is_missing() -> None:
     lines = rep.equal_iterations_section(ROWS, SUITE)
     text = "\n".join(lines)
-    assert lines[0] == f"## {rep.ITERATIONS_TITLE}" and "runs a shorter one" in text and "loaded machine" in text
+    assert lines[0] == f"## {rep.ITERATIONS_TITLE}" and "runs a shorter one" in text and "one invocation" in text
     assert "| fourierf-vm-paper | 21.50 | 0.800 | 0.200 | 800 | 400 | 0.50 |" in lines
     assert "| zerorf-vm-no-alpha | 18.75 | 0.800 | 0.200 | 150 | 75 | 0.50 |" in lines
     assert "| zerorf-vm | not run | | | | | |" in lines  # fern's zerorf-vm: no row

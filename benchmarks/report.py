@@ -305,19 +305,6 @@ def time_cell(points: Sequence[tuple[float, float]], target: float) -> str:
     return "not reached" if found is None else ("≤ " if found[1] else "") + duration(found[0])
 
 
-def speed_cell(rows: Sequence[dict], scene: str, method: str, baseline: str) -> str:
-    """A method's mean seconds per iteration over the baseline's on a scene (est.: from too-short points' estimates)."""
-    means = []
-    for m in (method, baseline):
-        own = [r["seconds_per_iteration"] for r in timed(rows, scene, m)]
-        here = [r for r in rows if (r["scene"], r["method"]) == (scene, m)]
-        values = own or [r["estimated_seconds_per_iteration"] for r in here if "estimated_seconds_per_iteration" in r]
-        if not values:
-            return "—"
-        means.append((sum(values) / len(values), not own))
-    return f"{means[0][0] / means[1][0]:.2f}" + (" (est.)" if means[0][1] or means[1][1] else "")
-
-
 def methods_of(rows: Sequence[dict], suite: harness.Suite) -> list[str]:
     """The suite's methods that have rows, in the suite's order, then any others the rows hold."""
     listed = [m for m in suite.equal_time["methods"] if any(r["method"] == m for r in rows)]
@@ -353,21 +340,6 @@ def scene_tables(rows: Sequence[dict], scene: str, suite: harness.Suite) -> list
     )
 
 
-def speed_table(rows: Sequence[dict], suite: harness.Suite) -> list[str]:
-    baseline, paper = suite.equal_time["baseline"], suite.equal_time["paper_time_ratio"]
-    scenes = [s for s in suite.equal_time["scenes"] if any(r["scene"] == s for r in rows)]
-    lines = [
-        harness.md_row([m, *(speed_cell(rows, s, m, baseline) for s in scenes), paper.get(m, "—")])
-        for m in methods_of(rows, suite)
-    ]
-    return harness.titled_table(
-        f"Seconds per iteration over {baseline}'s (mean over the budgets that trained; est.: from the trainer's "
-        "estimate where no budget fitted), beside the paper's Table 3:",
-        ["method", *scenes, "paper"],
-        lines,
-    )
-
-
 def equal_time_section(rows: Sequence[dict], suite: harness.Suite) -> list[str]:
     side = lego_side(suite)
     body = stage_head(
@@ -397,7 +369,8 @@ def equal_time_section(rows: Sequence[dict], suite: harness.Suite) -> list[str]:
     total, jobs = sum(r["seconds"] for r in rows), max(r["jobs"] for r in rows)
     return [
         *body,
-        *speed_table(rows, suite),
+        f'Training time over {BASELINE}\'s: the last line of "{ITERATIONS_TITLE}" (rows of one invocation only).',
+        "",
         f"The {len(rows)} points took {duration(total)} in all, about {duration(total / jobs)} at {jobs} at a time.",
         "",
         f"![test PSNR against training time, log axis]({FIGURE})",

@@ -66,7 +66,6 @@ def quality_job(point: Point, args: argparse.Namespace) -> harness.Job:
 # row that says so, not a failure.
 THREADS = 1  # a CPU run is then bit-reproducible, and two run side by side on two cores
 TOO_SHORT = re.compile(r"--time-budget \S+ is too short[^\n]*")
-ESTIMATE = re.compile(r"~([0-9.e+-]+) s per iteration")  # the too-short message's: a speed for the slowest methods
 TrainArgs = tuple[harness.Run, Path, list[str], Path, list[str]]  # ``train_and_eval``'s first arguments
 
 
@@ -125,7 +124,7 @@ def too_short(log: Path) -> str | None:
 
 
 def execute_timed(
-    point: TimedPoint, suite: harness.Suite, data: Path, work: Path, lpips: Path, jobs: int, invocation: str = ""
+    point: TimedPoint, suite: harness.Suite, data: Path, work: Path, lpips: Path, jobs: int, invocation: str
 ) -> dict:
     """Train and evaluate one point; its row (planned and actual training seconds from the run's metrics).
     ``invocation`` names the run.py call the point ran in: only its rows shared one machine and one load."""
@@ -141,8 +140,6 @@ def execute_timed(
     except RuntimeError:
         if (message := too_short(scene_work / f"{run.key}.train.log")) is None:
             raise
-        estimate = ESTIMATE.search(message)
-        row |= {"estimated_seconds_per_iteration": float(estimate.group(1))} if estimate else {}
         return row | {"too_short": message, "seconds": time.perf_counter() - started}
     done = harness.done_record(harness.read_jsonl(Path(trained["run_dir"]) / "metrics.jsonl", torn=True)) or {}
     iterations, seconds = int(done["step"]), float(done["train_seconds"])

@@ -71,8 +71,8 @@ def test_the_plan_runs_the_slowest_methods_first_and_a_variant_on_its_scenes_onl
 
 def test_a_point_records_its_iterations_flags_and_metrics(fake_runs: dict, tmp_path: Path) -> None:  # noqa: F811
     point = runner.TimedPoint("lego", "zerorf-vm-no-alpha", BUDGET)
-    row = runner.execute_timed(point, SUITE, tmp_path, tmp_path, tmp_path, 2)
-    assert row["budget_iterations"] == 800 and "budget_seconds" not in row and row["invocation"] == ""
+    row = runner.execute_timed(point, SUITE, tmp_path, tmp_path, tmp_path, 2, "a")
+    assert row["budget_iterations"] == 800 and "budget_seconds" not in row and row["invocation"] == "a"
     assert row["flags"] == ["--pipeline.model.alpha-weight", "0"] and row["method"] == "zerorf-vm-no-alpha"
     assert row["iterations"] == 500 and row["seconds_per_iteration"] == pytest.approx(0.11)
     assert (row["psnr"], row["ssim"], row["lpips"]) == (21.0, 0.8, 0.2)
